@@ -1,0 +1,67 @@
+"""Command line: `python -m ddfbench [overrides]` (Hydra). A thin wrapper around runner.run.
+
+With no arguments at all it runs `+experiment=default` (every family on the bunny, small budget).
+A single run that fails exits non-zero with a one-line error; in a sweep a failure is a `failed`
+record and the sweep goes on. Nothing here holds module-level state (launchers pickle the task).
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+from typing import Any
+
+import hydra
+from hydra.core.hydra_config import HydraConfig
+from hydra.experimental.callback import Callback
+from hydra.types import RunMode
+from omegaconf import DictConfig, OmegaConf
+
+KEY_FILE = "ddfbench_key.txt"  # written in each Hydra job folder: which record the job produced
+
+
+@hydra.main(version_base="1.3", config_path="../conf", config_name="config")
+def task(cfg: DictConfig) -> str:
+    """One Hydra job: resolve the config, run it, return the record key."""
+    from ddfbench import runner
+    from ddfbench.report.tables import summarize, to_markdown
+
+    hc = HydraConfig.get()
+    plain: dict[str, Any] = OmegaConf.to_container(cfg, resolve=True)  # type: ignore[assignment]
+    record = runner.run(plain, choices=dict(hc.runtime.choices), overrides=list(hc.overrides.task))
+    with open(os.path.join(hc.runtime.output_dir, KEY_FILE), "w") as fh:
+        fh.write(f"{record['experiment']}/{record['key']}\n")
+    if hc.mode == RunMode.RUN:
+        if not cfg.get("quiet", False):
+            print(to_markdown(summarize([record])))
+        if record["status"] != "ok":
+            print(f"ddfbench: {record['error']}", file=sys.stderr)
+            sys.exit(1)
+    return record["key"]
+
+
+class SweepTableCallback(Callback):
+    """At the end of a sweep, print the table of the records this sweep produced."""
+
+    def on_multirun_end(self, config: DictConfig, **kwargs: Any) -> None:
+        from ddfbench.report.tables import summarize, to_markdown
+        from ddfbench.runs import read_record
+
+        sweep_dir, out_dir = str(config.hydra.sweep.dir), str(config.get("out_dir", "results"))
+        records = []
+        for job in sorted(os.listdir(sweep_dir)) if os.path.isdir(sweep_dir) else []:
+            key_file = os.path.join(sweep_dir, job, KEY_FILE)
+            if os.path.exists(key_file):
+                with open(key_file) as fh:
+                    rec = read_record(os.path.join(out_dir, fh.read().strip(), "record.json"))
+                if rec:
+                    records.append(rec)
+        if records and not config.get("quiet", False):
+            print(to_markdown(summarize(records)))
+
+
+def main() -> None:
+    """Entry point: no arguments means the default benchmark experiment."""
+    if len(sys.argv) == 1:
+        sys.argv.append("+experiment=default")
+    task()

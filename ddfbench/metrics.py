@@ -1,0 +1,164 @@
+"""Point-cloud and surface metrics (DESIGN.md conventions), KD-tree based.
+
+Conventions: chamfer L2 is squared and summed (Kaolin): w1·mean_a min_b‖a−b‖² + w2·mean_b min_a‖a−b‖².
+Chamfer L1 (Occupancy Networks) is ½(mean dist a→b + mean dist b→a), unsquared.
+Sided distance is the squared distance of each point of a to the nearest point of b.
+F-score at radius r uses unsquared distances. Units: the normalized frame (unit cube).
+"""
+
+from __future__ import annotations
+
+from typing import Any, Sequence
+
+import numpy as np
+import trimesh
+from scipy.spatial import cKDTree
+
+# Domain-box diagonal for the default padded box (half-side 0.6): the largest distance two points
+# of the field domain can have. Empty reconstructions get the worst value this allows.
+PENALTY_DISTANCE = float(2 * 0.6 * np.sqrt(3.0))
+
+
+def nearest_distance(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """For each point of a (N,3): unsigned distance (N,) float64 to the nearest point of b (M,3) and its index."""
+    tree = cKDTree(np.asarray(b, np.float64))
+    dist, idx = tree.query(np.asarray(a, np.float64), k=1, workers=-1)
+    return dist, idx
+
+
+def sided_distance(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Squared distance (N,) from each point of a (N,3) to the nearest point of b (M,3) (paper Eq. 15)."""
+    return nearest_distance(a, b)[0] ** 2
+
+
+def chamfer_distance(a: np.ndarray, b: np.ndarray, w1: float = 1.0, w2: float = 1.0) -> float:
+    """Chamfer L2 (paper Eq. 14): w1·mean sided(a, b) + w2·mean sided(b, a), squared distances."""
+    return float(w1 * sided_distance(a, b).mean() + w2 * sided_distance(b, a).mean())
+
+
+def chamfer_l1(a: np.ndarray, b: np.ndarray) -> float:
+    """½(mean distance a→b + mean distance b→a), unsquared (Occupancy Networks)."""
+    return float(0.5 * (nearest_distance(a, b)[0].mean() + nearest_distance(b, a)[0].mean()))
+
+
+def precision_recall(gt: np.ndarray, pred: np.ndarray, radius: float) -> tuple[float, float]:
+    """precision = share of pred within radius of gt; recall = share of gt within radius of pred."""
+    d_pred, _ = nearest_distance(pred, gt)
+    d_gt, _ = nearest_distance(gt, pred)
+    return float((d_pred <= radius).mean()), float((d_gt <= radius).mean())
+
+
+def f_score(gt: np.ndarray, pred: np.ndarray, radius: float) -> float:
+    """F = 2PR/(P+R) at an unsquared radius; 0 where P+R = 0."""
+    p, r = precision_recall(gt, pred, radius)
+    return 0.0 if p + r == 0 else 2 * p * r / (p + r)
+
+
+def summary(values: np.ndarray) -> dict[str, float]:
+    """mean, median and 95th percentile of a 1-D array."""
+    return {"mean": float(values.mean()), "median": float(np.median(values)), "p95": float(np.percentile(values, 95))}
+
+
+def sample_surface(mesh: trimesh.Trimesh, n: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """n points (n,3) area-uniform on the mesh and their face normals (n,3), reproducible from seed."""
+    rng = np.random.default_rng(seed)
+    v, f = np.asarray(mesh.vertices, np.float64), np.asarray(mesh.faces)
+    tri = v[f]
+    cross = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    area = np.linalg.norm(cross, axis=1)
+    face = rng.choice(len(f), size=n, p=area / area.sum())
+    uv = rng.random((n, 2))
+    fold = uv.sum(axis=1) > 1.0
+    uv[fold] = 1.0 - uv[fold]
+    t = tri[face]
+    points = t[:, 0] + uv[:, :1] * (t[:, 1] - t[:, 0]) + uv[:, 1:] * (t[:, 2] - t[:, 0])
+    normals = cross[face] / np.maximum(area[face], 1e-300)[:, None]
+    return points, normals
+
+
+def normal_consistency(a: np.ndarray, na: np.ndarray, b: np.ndarray, nb: np.ndarray) -> float:
+    """Mean |cos| between each point's normal and its nearest neighbour's normal in the other set, both ways."""
+    _, ia = nearest_distance(a, b)
+    _, ib = nearest_distance(b, a)
+    ab = np.abs(np.einsum("ij,ij->i", na, nb[ia]))
+    ba = np.abs(np.einsum("ij,ij->i", nb, na[ib]))
+    return float(0.5 * (ab.mean() + ba.mean()))
+
+
+def point_to_surface(points: np.ndarray, mesh: trimesh.Trimesh) -> np.ndarray:
+    """Exact unsigned distance (N,) from points to the triangles of mesh (open3d RaycastingScene)."""
+    import open3d as o3d
+
+    scene = o3d.t.geometry.RaycastingScene()
+    scene.add_triangles(o3d.core.Tensor(np.asarray(mesh.vertices, np.float32)),
+                        o3d.core.Tensor(np.asarray(mesh.faces, np.uint32)))
+    return scene.compute_distance(o3d.core.Tensor(np.asarray(points, np.float32))).numpy().astype(np.float64)
+
+
+def cloud_metrics(gt: np.ndarray, rec: np.ndarray, radii: Sequence[float]) -> dict[str, Any]:
+    """Chamfer L2/L1, f-score per radius and sided distances between two point clouds."""
+    d_gr, _ = nearest_distance(gt, rec)
+    d_rg, _ = nearest_distance(rec, gt)
+    out: dict[str, Any] = {
+        "chamfer_l2": float((d_gr**2).mean() + (d_rg**2).mean()),
+        "chamfer_l1": float(0.5 * (d_gr.mean() + d_rg.mean())),
+        "fscore": {},
+        "sided_gt_to_rec": summary(d_gr**2),
+        "sided_rec_to_gt": summary(d_rg**2),
+    }
+    for r in radii:
+        p, rc = float((d_rg <= r).mean()), float((d_gr <= r).mean())
+        out["fscore"][str(r)] = 0.0 if p + rc == 0 else 2 * p * rc / (p + rc)
+    return out
+
+
+def penalty_metrics(radii: Sequence[float]) -> dict[str, Any]:
+    """Metrics of an empty or failed reconstruction: the worst values the domain allows, flagged."""
+    worst = PENALTY_DISTANCE
+    side = {"mean": worst**2, "median": worst**2, "p95": worst**2}
+    return {
+        "chamfer_l2": 2 * worst**2,
+        "chamfer_l1": worst,
+        "fscore": {str(r): 0.0 for r in radii},
+        "sided_gt_to_rec": dict(side),
+        "sided_rec_to_gt": dict(side),
+        "normal_consistency": 0.0,
+        "empty_reconstruction": True,
+    }
+
+
+def geometry_metrics(
+    gt: trimesh.Trimesh,
+    rec: trimesh.Trimesh,
+    n_points: int,
+    radii: Sequence[float],
+    seed: int = 0,
+    noise_floor: bool = True,
+    with_point_to_surface: bool = True,
+) -> dict[str, Any]:
+    """Every geometry metric of a reconstruction against GT, on n_points seeded samples per surface.
+
+    An empty reconstruction (no faces or no area) gets penalty_metrics with empty_reconstruction=True.
+    noise_floor: the same metrics of GT against an independent resample of GT (the metric's floor).
+    """
+    gt_pts, gt_n = sample_surface(gt, n_points, seed)
+    empty = rec is None or len(rec.faces) == 0 or not np.isfinite(rec.vertices).all() or rec.area <= 0
+    if empty:
+        out = penalty_metrics(radii)
+    else:
+        rec_pts, rec_n = sample_surface(rec, n_points, seed + 1)
+        out = cloud_metrics(gt_pts, rec_pts, radii)
+        out["normal_consistency"] = normal_consistency(gt_pts, gt_n, rec_pts, rec_n)
+        out["empty_reconstruction"] = False
+        if with_point_to_surface:
+            to_rec = point_to_surface(gt_pts, rec)
+            to_gt = point_to_surface(rec_pts, gt)
+            out["p2s_chamfer_l2"] = float((to_rec**2).mean() + (to_gt**2).mean())
+            out["p2s_chamfer_l1"] = float(0.5 * (to_rec.mean() + to_gt.mean()))
+    if noise_floor:
+        resample, _ = sample_surface(gt, n_points, seed + 2)
+        floor = cloud_metrics(gt_pts, resample, radii)
+        out["noise_floor"] = {"chamfer_l2": floor["chamfer_l2"], "chamfer_l1": floor["chamfer_l1"],
+                              "fscore": floor["fscore"]}
+    out["n_points"] = int(n_points)
+    return out

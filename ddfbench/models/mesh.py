@@ -1,0 +1,90 @@
+"""The triangle mesh (and its LODs by quadric decimation): the reference family.
+
+Rays are answered by Embree (open3d RaycastingScene, or embreex via the oracle's
+second backend); storage is the size of the saved binary `.ply`.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any, Mapping
+
+import numpy as np
+import pymeshlab
+import trimesh
+
+from ddfbench.oracle import Oracle
+from ddfbench.representation import Budget, FitData, FitStats, Hits, Probe, RayStatus, Representation
+
+
+def decimate(mesh: trimesh.Trimesh, faces: int) -> trimesh.Trimesh:
+    """Quadric edge-collapse decimation to about `faces` triangles (pymeshlab); the mesh itself if smaller."""
+    if faces <= 0 or faces >= len(mesh.faces):
+        return mesh
+    ms = pymeshlab.MeshSet()
+    ms.add_mesh(pymeshlab.Mesh(np.asarray(mesh.vertices, np.float64), np.asarray(mesh.faces, np.int32)))
+    ms.meshing_decimation_quadric_edge_collapse(
+        targetfacenum=int(faces), preservenormal=True, preservetopology=False, qualitythr=0.3
+    )
+    out = ms.current_mesh()
+    return trimesh.Trimesh(out.vertex_matrix(), out.face_matrix(), process=False)
+
+
+class MeshFamily(Representation):
+    """cfg: faces (0 = full resolution), backend ("open3d" | "embree")."""
+
+    family = "mesh"
+    sample_kind = None
+
+    def __init__(self, cfg: Mapping[str, Any], domain: float = 0.6):
+        super().__init__(cfg, domain)
+        self.mesh: trimesh.Trimesh | None = None
+        self._oracle: Oracle | None = None
+
+    def _set_mesh(self, mesh: trimesh.Trimesh) -> None:
+        self.mesh = mesh
+        self._oracle = Oracle(mesh, backend=str(self.cfg.get("backend", "open3d")))
+
+    def fit(self, data: FitData, budget: Budget, probe: Probe | None = None) -> FitStats:
+        start = time.perf_counter()
+        self._set_mesh(decimate(data.mesh, int(self.cfg.get("faces", 0) or 0)))
+        seconds = time.perf_counter() - start
+        stats = FitStats(steps=1, seconds=seconds, extra={"faces": int(len(self.mesh.faces))})
+        if probe is not None:
+            stats.probes.append({"step": 1, "seconds": seconds, **probe(self)})
+        return stats
+
+    def intersect(self, origins: np.ndarray, directions: np.ndarray, normals: bool = True) -> Hits:
+        t, tri, normal = self._oracle.first_hit(origins, directions)
+        hit = tri >= 0
+        return Hits(
+            t=t,
+            hit=hit,
+            normal=normal if normals else np.zeros_like(normal),
+            status=np.where(hit, RayStatus.HIT, RayStatus.MISS).astype(np.int8),
+            normal_valid=hit & normals,
+            stats={"bvh_queries": int(len(t))},
+        )
+
+    def to_mesh(self, resolution: int) -> trimesh.Trimesh:
+        return self.mesh
+
+    def n_params(self) -> int:
+        return int(self.mesh.vertices.size + self.mesh.faces.size)
+
+    def save(self, path: str) -> str:
+        if not path.endswith(".ply"):
+            path = f"{path}.ply"
+        self.mesh.export(path, file_type="ply", encoding="binary")
+        self._saved_path = path
+        return path
+
+    @classmethod
+    def load(cls, path: str, domain: float = 0.6) -> "MeshFamily":
+        rep = cls({"faces": 0}, domain)
+        rep._set_mesh(trimesh.load(path, force="mesh", process=False))
+        rep._saved_path = path
+        return rep
+
+
+FAMILY = MeshFamily

@@ -1,0 +1,146 @@
+"""The interface every shape family implements, and the plain data it exchanges.
+
+Frames: every array is in the normalized frame of the GT mesh (unit cube
+[-0.5, 0.5]^3, field domain the padded box [-domain, domain]^3).
+"""
+
+from __future__ import annotations
+
+import abc
+import enum
+import os
+from dataclasses import dataclass, field
+from typing import Any, Callable, ClassVar, Mapping
+
+import numpy as np
+import trimesh
+
+
+class RayStatus(enum.IntEnum):
+    """Outcome of one ray query."""
+
+    MISS = 0
+    HIT = 1
+    UNDECIDED = 2  # e.g. sphere tracing hit its step cap: never silently a hit
+
+
+@dataclass
+class Hits:
+    """Answer to `intersect` for N rays.
+
+    t:       (N,) float32, distance along the unit direction to the first hit; inf where no hit.
+    hit:     (N,) bool.
+    normal:  (N, 3) float32 unit normals facing the ray (n·d < 0); zeros where no hit or not asked.
+    status:  (N,) int8 of RayStatus.
+    normal_valid: (N,) bool, False where a normal could not be computed (e.g. zero gradient).
+    stats:   work done answering, for the counting layer: field_evals, backward_passes, trace_steps.
+    """
+
+    t: np.ndarray
+    hit: np.ndarray
+    normal: np.ndarray
+    status: np.ndarray
+    normal_valid: np.ndarray | None = None
+    stats: dict[str, int] = field(default_factory=dict)
+
+    @staticmethod
+    def empty(n: int) -> "Hits":
+        return Hits(
+            t=np.full(n, np.inf, np.float32),
+            hit=np.zeros(n, bool),
+            normal=np.zeros((n, 3), np.float32),
+            status=np.full(n, RayStatus.MISS, np.int8),
+            normal_valid=np.zeros(n, bool),
+        )
+
+
+@dataclass
+class Budget:
+    """How much a fit may spend. max_seconds is wall clock of training only (probes excluded)."""
+
+    max_steps: int = 1000
+    max_seconds: float = 60.0
+    device: str = "cpu"
+    seed: int = 0
+    n_probes: int = 6  # log-spaced accuracy probes along the budget
+
+
+@dataclass
+class FitStats:
+    """What a fit did: steps taken, training seconds, loss curve and accuracy probes.
+
+    loss_curve: list of (step, seconds, loss).
+    probes:     list of dicts {step, seconds, chamfer_l2, fscore_0.01, ...} at log-spaced points.
+    status:     "ok" or "failed" (e.g. NaN guard), with message.
+    """
+
+    steps: int = 0
+    seconds: float = 0.0
+    loss_curve: list[tuple[int, float, float]] = field(default_factory=list)
+    probes: list[dict[str, float]] = field(default_factory=list)
+    status: str = "ok"
+    message: str | None = None
+    extra: dict[str, Any] = field(default_factory=dict)
+
+
+# A probe maps a representation to cheap accuracy numbers; fit calls it at log-spaced points.
+Probe = Callable[["Representation"], dict[str, float]]
+
+
+class Representation(abc.ABC):
+    """A shape family. Subclass in `ddfbench/models/<family>.py` and expose it as `FAMILY`.
+
+    cfg is the `model` config node as a plain dict; domain is the half-side of the field box.
+    `sample_kind` says what training samples fit wants: "rays" (x, d, t, hit), "sdf" (x, sdf) or None.
+    """
+
+    family: ClassVar[str] = "abstract"
+    sample_kind: ClassVar[str | None] = None
+
+    def __init__(self, cfg: Mapping[str, Any], domain: float = 0.6):
+        self.cfg = dict(cfg)
+        self.domain = float(domain)
+        self._saved_path: str | None = None
+
+    @abc.abstractmethod
+    def fit(self, data: "FitData", budget: Budget, probe: Probe | None = None) -> FitStats:
+        """Train or build from data; respect budget.max_steps and budget.max_seconds."""
+
+    @abc.abstractmethod
+    def intersect(self, origins: np.ndarray, directions: np.ndarray, normals: bool = True) -> Hits:
+        """First hit of rays (N,3) origins and (N,3) unit directions. Skip normal work if normals=False."""
+
+    @abc.abstractmethod
+    def to_mesh(self, resolution: int) -> trimesh.Trimesh:
+        """A triangle mesh of the surface (possibly empty: zero faces), for geometry metrics."""
+
+    @abc.abstractmethod
+    def save(self, path: str) -> str:
+        """Write the artifact a user would ship; return the path written."""
+
+    @classmethod
+    @abc.abstractmethod
+    def load(cls, path: str, domain: float = 0.6) -> "Representation":
+        """Read an artifact written by save (models: torch.load(weights_only=True))."""
+
+    def n_params(self) -> int:
+        """Number of stored scalars (network parameters, grid cells, vertex coordinates...)."""
+        return 0
+
+    def storage_bytes(self) -> int:
+        """File bytes of the saved artifact (the last `save`)."""
+        if self._saved_path is None:
+            raise RuntimeError(f"{self.family}: storage_bytes() needs save() first")
+        p = self._saved_path
+        if os.path.isdir(p):
+            return sum(os.path.getsize(os.path.join(r, f)) for r, _, fs in os.walk(p) for f in fs)
+        return os.path.getsize(p)
+
+
+@dataclass
+class FitData:
+    """Everything fit may use: training samples (or None), the normalized GT mesh and its oracle."""
+
+    samples: Any  # ddfbench.samples.Samples | None
+    mesh: trimesh.Trimesh
+    oracle: Any  # ddfbench.oracle.Oracle

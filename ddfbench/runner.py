@@ -1,0 +1,184 @@
+"""One job, stage by stage: shape → oracle → samples → fit → extract → metrics → render → record.
+
+`run(cfg)` never raises for a bad input or a failing stage: it writes a `failed` record with a
+one-line error (traceback beside it in error.log) and returns it; the CLI turns that into a
+non-zero exit for a single run, while a sweep goes on.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import logging
+import os
+import time
+import traceback
+from typing import Any, Mapping
+
+import numpy as np
+import torch
+
+from ddfbench import runs
+from ddfbench.errors import InputError
+from ddfbench.metrics import cloud_metrics, geometry_metrics, penalty_metrics, sample_surface
+from ddfbench.models import load_family
+from ddfbench.oracle import Oracle
+from ddfbench.representation import Budget, FitData, Representation
+from ddfbench.shapes import load_shape
+
+log = logging.getLogger(__name__)
+
+
+class StageFailed(RuntimeError):
+    """A stage ended without an exception but with a failure it reported (e.g. the NaN guard)."""
+
+
+def _now() -> str:
+    return _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
+
+
+def resolve_device(name: str) -> str:
+    """"auto" → cuda where available, else cpu; "cuda" without a GPU is an input error."""
+    if name == "auto":
+        return "cuda" if torch.cuda.is_available() else "cpu"
+    if name.startswith("cuda") and not torch.cuda.is_available():
+        raise InputError(f"train.device={name}: no CUDA device is available here (use cpu or auto)")
+    if name != "cpu" and not name.startswith("cuda"):
+        raise InputError(f"train.device={name}: unknown device (cpu | cuda | auto)")
+    return name
+
+
+def _probe_fn(gt_points: np.ndarray, resolution: int, radii: list[float]):
+    """Cheap accuracy probe for fit curves: chamfer L2 and f-score on len(gt_points) samples."""
+
+    def probe(rep: Representation) -> dict[str, float]:
+        mesh = rep.to_mesh(resolution)
+        if len(mesh.faces) == 0 or mesh.area <= 0:
+            m = penalty_metrics(radii)
+        else:
+            m = cloud_metrics(gt_points, sample_surface(mesh, len(gt_points), 1)[0], radii)
+        return {"chamfer_l2": m["chamfer_l2"], **{f"fscore@{r}": v for r, v in m["fscore"].items()}}
+
+    return probe
+
+
+def _set_threads(threads: int) -> int:
+    n = int(threads) if threads and threads > 0 else (os.cpu_count() or 1)
+    torch.set_num_threads(n)
+    return n
+
+
+def _stages(cfg: Mapping[str, Any], rdir: str, device: str, seed: int, out: dict[str, Any]) -> None:
+    """Run every stage, filling `out` (the record in progress) as each finishes."""
+    from ddfbench import sampling
+
+    cost, artifacts = out["cost"], out["artifacts"]
+    shape = load_shape(cfg["shape"])
+    out["shape"] = shape.summary()
+    oracle = Oracle(shape.mesh, **cfg.get("oracle", {}))
+    Family = load_family(str(cfg["model"]["family"]))
+    os.makedirs(rdir, exist_ok=True)
+    shape.mesh.export(os.path.join(rdir, "gt_mesh.ply"), file_type="ply", encoding="binary")
+    artifacts["gt_mesh"] = "gt_mesh.ply"
+
+    cache_dir = os.path.join(cfg.get("out_dir", "results"), ".cache", "datasets")
+    kind = Family.sample_kind or "rays"
+    samples, dataset_path, info = sampling.build(shape, oracle, dict(cfg["sampling"]), kind, seed, cache_dir)
+    out["sampling"] = {**dict(cfg["sampling"]), **info}
+    cost["sampling_s"] = float(info.get("sampling_s", 0.0))
+    artifacts["dataset"] = os.path.relpath(dataset_path, rdir)
+
+    ev, tr = cfg["eval"], cfg["train"]
+    radii = [float(r) for r in ev["radii"]]
+    domain = float(cfg.get("domain", 0.6))
+    rep = Family(dict(cfg["model"]), domain=domain)
+    budget = Budget(max_steps=int(tr["max_steps"]), max_seconds=float(tr["max_seconds"]), device=device,
+                    seed=seed, n_probes=int(tr.get("n_probes", 5)))
+    gt_probe_points = sample_surface(shape.mesh, int(tr.get("probe_points", 5000)), seed + 7)[0]
+    probe = _probe_fn(gt_probe_points, min(64, int(ev["mesh_resolution"])), radii)
+    t0 = time.perf_counter()
+    stats = rep.fit(FitData(samples=samples, mesh=shape.mesh, oracle=oracle), budget, probe)
+    cost["fit_wall_s"] = time.perf_counter() - t0
+    cost["fit_s"] = float(stats.seconds)
+    out["fit"] = {"steps": stats.steps, "seconds": stats.seconds, "loss_curve": stats.loss_curve,
+                  "probes": stats.probes, "status": stats.status, "message": stats.message, **stats.extra}
+    if stats.status != "ok":
+        raise StageFailed(f"fit of {Family.family} failed: {stats.message}")
+
+    t0 = time.perf_counter()
+    rec = rep.to_mesh(int(ev["mesh_resolution"]))
+    cost["extract_s"] = time.perf_counter() - t0
+    if len(rec.faces):
+        rec.export(os.path.join(rdir, "reconstruction.ply"), file_type="ply", encoding="binary")
+        artifacts["reconstruction"] = "reconstruction.ply"
+    saved = rep.save(os.path.join(rdir, "model"))
+    artifacts["model"] = os.path.relpath(saved, rdir)
+    cost["storage_bytes"] = int(rep.storage_bytes())
+    cost["n_params"] = int(rep.n_params())
+
+    t0 = time.perf_counter()
+    out["metrics"] = geometry_metrics(shape.mesh, rec, int(ev["n_points"]), radii, seed=seed,
+                                      noise_floor=bool(ev.get("noise_floor", True)),
+                                      with_point_to_surface=bool(ev.get("point_to_surface", True)))
+    cost["metrics_s"] = time.perf_counter() - t0
+    if out["metrics"].get("empty_reconstruction"):
+        out["flags"].append("empty_reconstruction")
+
+    scene = dict(cfg.get("scene") or {})
+    if scene.get("outputs"):
+        from ddfbench.render import render_scene
+
+        reference = load_family("mesh")({"faces": 0}, domain=domain)
+        reference.fit(FitData(samples=None, mesh=shape.mesh, oracle=oracle), budget)
+        result = render_scene(rep, reference, scene, rdir, seed)
+        out["metrics"].update(result.get("metrics", {}))
+        cost.update(result.get("cost", {}))
+        out["counts"].update(result.get("counts", {}))
+        artifacts["renders"] = result.get("artifacts")
+
+
+def _one_line(exc: BaseException) -> str:
+    text = str(exc).strip().splitlines()
+    msg = text[0] if text else ""
+    return msg if isinstance(exc, (InputError, StageFailed)) else f"{type(exc).__name__}: {msg}"
+
+
+def run(cfg: Mapping[str, Any], choices: Mapping[str, str] | None = None,
+        overrides: list[str] | None = None) -> dict[str, Any]:
+    """Run one job from a resolved config (plain dict); return its record (also written to disk)."""
+    choices = dict(choices or {})
+    experiment = str(cfg.get("experiment_name", "single"))
+    key = runs.config_key(cfg)
+    rdir = runs.run_dir(str(cfg.get("out_dir", "results")), experiment, key)
+    rpath = os.path.join(rdir, "record.json")
+    if runs.is_done(rpath) and not cfg.get("force", False):
+        log.info("skip %s: ok record exists (force=true re-runs)", rpath)
+        return runs.read_record(rpath)
+
+    seed = int(cfg.get("seed", 0))
+    threads = _set_threads(int(cfg.get("threads", 0)))
+    scene = dict(cfg.get("scene") or {})
+    out: dict[str, Any] = {
+        "schema_version": runs.SCHEMA_VERSION, "key": key, "status": "failed", "error": None,
+        "experiment": experiment, "family": str(cfg.get("model", {}).get("family")),
+        "model": choices.get("model", str(cfg.get("model", {}).get("family"))),
+        "shape": {"name": cfg.get("shape", {}).get("name")}, "sampling": dict(cfg.get("sampling") or {}),
+        "scene": {k: scene.get(k) for k in ("name", "outputs", "width", "height", "spp", "max_depth")},
+        "metrics": {}, "cost": {}, "counts": {}, "artifacts": {}, "flags": [],
+        "config": runs.semantic_config(cfg), "overrides": list(overrides or []), "env": {},
+        "started": _now(), "finished": None,
+    }
+    try:
+        device = resolve_device(str(cfg.get("train", {}).get("device", "cpu")))
+        out["env"] = runs.environment(device, threads)
+        torch.manual_seed(seed)
+        _stages(cfg, rdir, device, seed, out)
+        out["status"] = "ok"
+    except Exception as exc:  # every failure becomes a record, never a crash mid-sweep
+        out["error"] = _one_line(exc)
+        os.makedirs(rdir, exist_ok=True)
+        with open(os.path.join(rdir, "error.log"), "w") as fh:
+            fh.write(traceback.format_exc())
+        log.error("run %s failed: %s", key, out["error"])
+    out["finished"] = _now()
+    runs.write_json_atomic(rpath, out)
+    return out

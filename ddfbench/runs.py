@@ -1,0 +1,131 @@
+"""Run records: schema version, config key, atomic write, resume.
+
+A run writes <out_dir>/<experiment>/<key>/record.json by temporary file + rename, so a
+reader (or a run killed with SIGKILL) sees either no record or a complete one.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import os
+import platform
+import socket
+import subprocess
+import tempfile
+from typing import Any, Mapping
+
+SCHEMA_VERSION = 1
+
+# Top-level config keys that do not change results: paths, resume flags, worker counts, logging.
+NON_SEMANTIC_KEYS = ("out_dir", "force", "threads", "quiet", "experiment_name", "hydra")
+
+RECORD_FIELDS = (
+    "schema_version", "key", "status", "error", "experiment", "family", "model", "shape", "sampling",
+    "scene", "metrics", "cost", "counts", "artifacts", "config", "overrides", "env", "started", "finished",
+)
+
+
+def semantic_config(cfg: Mapping[str, Any]) -> dict[str, Any]:
+    """The resolved config minus non-semantic keys."""
+    return {k: v for k, v in cfg.items() if k not in NON_SEMANTIC_KEYS}
+
+
+def config_key(cfg: Mapping[str, Any]) -> str:
+    """16 hex chars: sha256 of the semantic config (canonical JSON) and the schema version."""
+    blob = json.dumps({"schema": SCHEMA_VERSION, "config": semantic_config(cfg)}, sort_keys=True, default=str)
+    return hashlib.sha256(blob.encode()).hexdigest()[:16]
+
+
+def run_dir(out_dir: str, experiment: str, key: str) -> str:
+    return os.path.join(out_dir, experiment, key)
+
+
+def record_path(out_dir: str, experiment: str, key: str) -> str:
+    return os.path.join(run_dir(out_dir, experiment, key), "record.json")
+
+
+def _json_safe(value: Any) -> Any:
+    """Replace non-finite floats by strings ("inf", "nan") so the file is strict JSON."""
+    if isinstance(value, float) and not math.isfinite(value):
+        return str(value)
+    if isinstance(value, dict):
+        return {str(k): _json_safe(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_json_safe(v) for v in value]
+    if hasattr(value, "item") and callable(value.item):  # numpy scalars
+        return _json_safe(value.item())
+    return value
+
+
+def write_json_atomic(path: str, data: Mapping[str, Any]) -> None:
+    """Write JSON to a temporary file in the same folder, fsync, then rename over path."""
+    folder = os.path.dirname(path) or "."
+    os.makedirs(folder, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=".record.", suffix=".tmp", dir=folder)
+    try:
+        with os.fdopen(fd, "w") as fh:
+            json.dump(_json_safe(dict(data)), fh, indent=1, allow_nan=False)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+
+
+def read_record(path: str) -> dict[str, Any] | None:
+    """The record at path, or None where there is none or it is not valid JSON."""
+    try:
+        with open(path) as fh:
+            return json.load(fh)
+    except (FileNotFoundError, json.JSONDecodeError):
+        return None
+
+
+def is_done(path: str) -> bool:
+    """True where an ok record of the current schema exists (the run is skipped unless forced)."""
+    rec = read_record(path)
+    return bool(rec) and rec.get("status") == "ok" and rec.get("schema_version") == SCHEMA_VERSION
+
+
+def find_records(root: str) -> list[dict[str, Any]]:
+    """Every record.json below root (any depth), each with its own folder under "_dir"."""
+    out = []
+    for folder, _, files in os.walk(root):
+        if "record.json" in files and (rec := read_record(os.path.join(folder, "record.json"))):
+            rec["_dir"] = folder
+            out.append(rec)
+    return sorted(out, key=lambda r: (r.get("experiment", ""), r.get("key", "")))
+
+
+def _git_sha() -> str | None:
+    try:
+        here = os.path.dirname(os.path.abspath(__file__))
+        out = subprocess.run(["git", "rev-parse", "HEAD"], cwd=here, capture_output=True, text=True, timeout=5)
+        return out.stdout.strip() or None
+    except (OSError, subprocess.SubprocessError):
+        return None
+
+
+def environment(device: str, threads: int) -> dict[str, Any]:
+    """Where and with what the run was measured."""
+    import numpy
+    import open3d
+    import torch
+    import trimesh
+
+    gpu = torch.cuda.get_device_name(0) if device.startswith("cuda") and torch.cuda.is_available() else None
+    return {
+        "git_sha": _git_sha(),
+        "versions": {"python": platform.python_version(), "torch": torch.__version__, "numpy": numpy.__version__,
+                     "trimesh": trimesh.__version__, "open3d": open3d.__version__},
+        "device": device,
+        "threads": int(threads),
+        "cpu": platform.processor() or platform.machine(),
+        "cpu_count": os.cpu_count(),
+        "gpu": gpu,
+        "hostname": socket.gethostname(),
+    }

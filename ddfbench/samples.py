@@ -1,0 +1,48 @@
+"""Labelled training samples, as every sampler returns them and every family reads them."""
+
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+
+@dataclass
+class Samples:
+    """N labelled samples in the normalized frame.
+
+    x:   (N, 3) float32 positions.
+    d:   (N, 3) float32 unit directions, or None for SDF-only samples.
+    t:   (N,) float32 first-hit distance along d; inf for a miss (use `hit`, never t, in losses).
+    hit: (N,) bool, t is finite.
+    sdf: (N,) float32 signed distance (negative inside), or None.
+    meta: strategy parameters and counts (rejections, timings), JSON-serializable.
+    """
+
+    x: np.ndarray
+    d: np.ndarray | None = None
+    t: np.ndarray | None = None
+    hit: np.ndarray | None = None
+    sdf: np.ndarray | None = None
+    meta: dict[str, Any] = field(default_factory=dict)
+
+    def __len__(self) -> int:
+        return int(self.x.shape[0])
+
+    def save_npz(self, path: str) -> None:
+        """Write atomically (temporary file, then rename) so a reader never sees half a file."""
+        arrays = {k: v for k in ("x", "d", "t", "hit", "sdf") if (v := getattr(self, k)) is not None}
+        arrays["meta"] = np.array(json.dumps(self.meta))
+        tmp = f"{path}.tmp{os.getpid()}.npz"
+        np.savez(tmp, **arrays)
+        os.replace(tmp, path)
+
+    @staticmethod
+    def load_npz(path: str) -> "Samples":
+        with np.load(path, allow_pickle=False) as z:
+            get = lambda k: z[k] if k in z.files else None  # noqa: E731
+            meta = json.loads(str(z["meta"])) if "meta" in z.files else {}
+            return Samples(x=z["x"], d=get("d"), t=get("t"), hit=get("hit"), sdf=get("sdf"), meta=meta)

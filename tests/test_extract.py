@@ -1,0 +1,107 @@
+"""Marching-cubes extraction against analytic fields (sphere, box)."""
+
+import numpy as np
+import pytest
+import torch
+
+from ddfbench.errors import InputError
+from ddfbench.extract import banded_grid, field_to_mesh, grid_points, sdf_to_mesh, udf_to_mesh
+
+R0 = 0.4
+
+
+def sphere_sdf(p):
+    return np.linalg.norm(p, axis=1) - R0
+
+
+def test_sphere_sdf_mesh_lies_on_sphere_with_outward_normals():
+    mesh, info = sdf_to_mesh(sphere_sdf, 49, 0.6)
+    assert not info["empty"] and info["field_evals"] == 49**3
+    r = np.linalg.norm(mesh.vertices, axis=1)
+    assert np.abs(r - R0).max() < 0.005
+    assert mesh.is_watertight
+    assert abs(mesh.volume - 4 / 3 * np.pi * R0**3) / (4 / 3 * np.pi * R0**3) < 0.01
+    outward = np.einsum("ij,ij->i", mesh.face_normals, mesh.triangles_center) > 0
+    assert outward.all()
+
+
+def test_box_sdf_mesh_spans_the_box():
+    half = np.array([0.3, 0.2, 0.1])
+    box = lambda p: np.max(np.abs(p) - half, axis=1)  # noqa: E731 (exact inside, a bound outside)
+    mesh, _ = sdf_to_mesh(box, 61, 0.6)
+    assert np.allclose(mesh.bounds[1], half, atol=0.01) and np.allclose(mesh.bounds[0], -half, atol=0.01)
+
+
+def test_narrow_band_matches_dense_grid_and_evaluates_less():
+    dense, n_dense = banded_grid(sphere_sdf, 65, 0.6, 0.0, coarse=1)
+    band, n_band = banded_grid(sphere_sdf, 65, 0.6, 0.0, coarse=4)
+    assert n_band < n_dense / 3
+    assert np.array_equal(np.sign(band), np.sign(dense))
+    near = np.abs(dense) < 1.2 / 64  # within one grid step: always evaluated
+    assert np.allclose(band[near], dense[near])
+    m1, _ = sdf_to_mesh(sphere_sdf, 65, 0.6)
+    m2, _ = sdf_to_mesh(sphere_sdf, 65, 0.6, coarse=4)
+    assert np.allclose(np.sort(m1.vertices, axis=0), np.sort(m2.vertices, axis=0))
+
+
+def test_udf_gives_two_shells_at_the_level():
+    level = 0.02
+    mesh, info = udf_to_mesh(lambda p: np.abs(sphere_sdf(p)), 61, 0.6, level, coarse=3)
+    r = np.linalg.norm(mesh.vertices, axis=1)
+    assert not info["empty"]
+    assert np.abs(np.abs(r - R0) - level).max() < 0.004
+    assert (r < R0).any() and (r > R0).any()
+    # normals point away from the sphere surface on both shells
+    c = mesh.triangles_center
+    rc = np.linalg.norm(c, axis=1)
+    away = np.einsum("ij,ij->i", mesh.face_normals, c) * np.sign(rc - R0) > 0
+    assert away[mesh.area_faces > 1e-9].all()
+
+
+def test_torch_field_and_batches():
+    fn = lambda p: torch.from_numpy(sphere_sdf(p))  # noqa: E731
+    m1, _ = sdf_to_mesh(fn, 33, 0.6, batch=1000)
+    m2, _ = sdf_to_mesh(sphere_sdf, 33, 0.6)
+    assert np.allclose(m1.vertices, m2.vertices)
+
+
+@pytest.mark.parametrize(
+    "field",
+    [lambda p: np.ones(len(p)), lambda p: -np.ones(len(p)), lambda p: np.full(len(p), np.nan),
+     lambda p: np.full(len(p), np.inf), lambda p: np.zeros(len(p))],
+)
+def test_fields_without_a_crossing_give_an_empty_flagged_mesh(field):
+    mesh, info = sdf_to_mesh(field, 17, 0.6)
+    assert info["empty"] and info["reason"] and len(mesh.faces) == 0
+    mesh, info = udf_to_mesh(lambda p: np.abs(field(p)), 17, 0.6, 0.01, coarse=4)
+    assert info["empty"] and len(mesh.faces) == 0
+
+
+def test_udf_with_inf_far_away_still_meshes():
+    def udf(p):
+        d = np.abs(sphere_sdf(p))
+        return np.where(d > 0.1, np.inf, d)  # nothing in sight far from the surface
+
+    mesh, info = udf_to_mesh(udf, 41, 0.6, 0.02)
+    r = np.linalg.norm(mesh.vertices, axis=1)
+    assert not info["empty"] and np.abs(np.abs(r - R0) - 0.02).max() < 0.005
+
+
+def test_nan_values_are_counted():
+    def field(p):
+        v = sphere_sdf(p)
+        v[np.linalg.norm(p, axis=1) > 0.55] = np.nan
+        return v
+
+    mesh, info = sdf_to_mesh(field, 33, 0.6)
+    assert info["nonfinite"] > 0 and not info["empty"]
+    assert np.abs(np.linalg.norm(mesh.vertices, axis=1) - R0).max() < 0.01
+
+
+def test_bad_arguments_raise_input_errors():
+    with pytest.raises(InputError):
+        udf_to_mesh(sphere_sdf, 17, 0.6, 0.0)
+    with pytest.raises(InputError):
+        grid_points(1, 0.6)
+    with pytest.raises(InputError):
+        field_to_mesh(np.zeros((4, 4, 5)), 0.6, 0.0)

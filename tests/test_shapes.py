@@ -1,0 +1,113 @@
+"""Loading, validation and normalization; every bad input gets a one-line error naming the file."""
+
+import numpy as np
+import pytest
+import trimesh
+
+from ddfbench.errors import InputError
+from ddfbench.shapes import PYMESHLAB_SAMPLES, catalog, load_shape
+
+
+def load_file(path):
+    return load_shape({"name": "file", "path": str(path)})
+
+
+def expect_error(path, fragment):
+    with pytest.raises(InputError) as info:
+        load_file(path)
+    msg = str(info.value)
+    assert "\n" not in msg
+    assert str(path) in msg
+    assert fragment in msg
+    return msg
+
+
+def test_missing_path(tmp_path):
+    expect_error(tmp_path / "nope.obj", "does not exist")
+
+
+def test_empty_file(tmp_path):
+    p = tmp_path / "empty.obj"
+    p.write_bytes(b"")
+    expect_error(p, "empty")
+
+
+def test_unreadable_bytes(tmp_path):
+    p = tmp_path / "junk.ply"
+    p.write_bytes(b"ply\nformat binary_little_endian 1.0\nelement vertex 99999\n" + bytes(range(256)) * 3)
+    expect_error(p, "could not be parsed")
+
+
+def test_unsupported_format(tmp_path):
+    p = tmp_path / "mesh.xyzw"
+    p.write_text("1 2 3\n")
+    expect_error(p, "unsupported format")
+
+
+def test_point_cloud_has_no_faces(tmp_path):
+    p = tmp_path / "cloud.ply"
+    trimesh.PointCloud(np.random.default_rng(0).normal(size=(50, 3))).export(p)
+    expect_error(p, "no faces")
+
+
+def test_nan_and_inf_vertices(tmp_path):
+    p = tmp_path / "nan.obj"
+    p.write_text("v 0 0 0\nv 1 0 0\nv 0 nan 0\nv 0 0 inf\nf 1 2 3\nf 1 2 4\n")
+    expect_error(p, "NaN or inf")
+
+
+def test_all_faces_zero_area(tmp_path):
+    p = tmp_path / "flat.obj"
+    p.write_text("v 0 0 0\nv 1 0 0\nv 2 0 0\nf 1 2 3\n")
+    expect_error(p, "zero area")
+
+
+def _write_obj(path, vertices, faces):
+    with open(path, "w") as fh:
+        fh.writelines(f"v {x:.17g} {y:.17g} {z:.17g}\n" for x, y, z in vertices)
+        fh.writelines(f"f {a + 1} {b + 1} {c + 1}\n" for a, b, c in faces)
+
+
+def test_degenerate_and_duplicate_faces_are_removed_with_warnings(tmp_path):
+    box = trimesh.creation.box()
+    faces = np.vstack([box.faces, box.faces[:2], [[0, 0, 1]]])
+    verts = np.vstack([box.vertices, [[9, 9, 9]]])  # one unreferenced vertex
+    p = tmp_path / "dirty.ply"  # PLY keeps unreferenced vertices (the OBJ reader drops them)
+    trimesh.Trimesh(verts, faces, process=False).export(p)
+    shape = load_file(p)
+    assert len(shape.mesh.faces) == 12
+    text = " ".join(shape.warnings)
+    assert "zero-area" in text and "duplicate" in text and "unreferenced" in text
+    assert shape.watertight
+
+
+@pytest.mark.parametrize("offset", [1e3, 1e5, 1e7])
+def test_far_from_origin_normalizes_to_the_same_mesh(tmp_path, offset):
+    sphere = trimesh.creation.icosphere(2, 0.7)
+    p = tmp_path / "far.obj"
+    _write_obj(p, sphere.vertices + offset, sphere.faces)
+    shape = load_file(p)
+    ref = load_shape({"name": "sphere", "params": {"radius": 0.7, "subdivisions": 2}})
+    assert np.abs(shape.mesh.vertices - ref.mesh.vertices).max() < 1e-6 * max(1.0, offset / 1e3)
+    assert np.allclose(shape.transform["center"], offset, rtol=1e-9)
+
+
+def test_normalization_puts_longest_side_to_one():
+    shape = load_shape({"name": "box"})
+    lo, hi = shape.mesh.bounds
+    assert np.isclose((hi - lo).max(), 1.0)
+    assert np.allclose(0.5 * (lo + hi), 0.0)
+    assert shape.transform["scale"] == pytest.approx(1.0)
+
+
+def test_catalog_resolves_from_installed_pymeshlab():
+    for name in ["bunny10k", "bone", "cube"]:
+        shape = load_shape({"name": name})
+        assert len(shape.mesh.faces) > 0
+    assert set(PYMESHLAB_SAMPLES) <= set(catalog())
+    assert not load_shape({"name": "bunny10k"}).watertight
+
+
+def test_unknown_name_lists_catalog():
+    with pytest.raises(InputError, match="unknown.*bunny"):
+        load_shape({"name": "teapot"})

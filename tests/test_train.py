@@ -1,0 +1,158 @@
+"""The shared training loop: budgets, probes, schedule, seeding and the NaN guard."""
+
+import time
+
+import pytest
+import torch
+
+from ddfbench.errors import InputError
+from ddfbench.representation import Budget
+from ddfbench.train import Schedule, probe_fractions, resolve_device, seed_everything, train_loop
+
+torch.set_num_threads(1)
+
+
+def regression(seed=0):
+    """A small linear regression problem and its step function."""
+    seed_everything(seed)
+    model = torch.nn.Linear(3, 1)
+    w_true = torch.tensor([[1.0, -2.0, 0.5]])
+    gen = torch.Generator().manual_seed(seed)
+
+    def step_fn(step):
+        x = torch.randn(64, 3, generator=gen)
+        return ((model(x) - x @ w_true.T) ** 2).mean()
+
+    return model, step_fn, w_true
+
+
+def test_loss_decreases_and_step_budget_is_respected():
+    model, step_fn, w_true = regression()
+    opt = torch.optim.Adam(model.parameters(), lr=0.05)
+    stats = train_loop(model, opt, step_fn, Budget(max_steps=300, max_seconds=1e6, n_probes=0), quiet=True)
+    assert stats.status == "ok" and stats.steps == 300 and stats.extra["stop"] == "max_steps"
+    assert torch.allclose(model.weight, w_true, atol=0.05)
+    losses = [loss for _, _, loss in stats.loss_curve]
+    assert losses[-1] < 0.01 * losses[0]
+    assert [s for s, _, _ in stats.loss_curve] == sorted(s for s, _, _ in stats.loss_curve)
+    assert stats.loss_curve[-1][0] == 300
+
+
+def test_wall_clock_budget_stops_training():
+    model, step_fn, _ = regression()
+
+    def slow(step):
+        time.sleep(0.01)
+        return step_fn(step)
+
+    opt = torch.optim.SGD(model.parameters(), lr=0.01)
+    stats = train_loop(model, opt, slow, Budget(max_steps=10**6, max_seconds=0.2, n_probes=0), quiet=True)
+    assert stats.extra["stop"] == "max_seconds" and stats.status == "ok"
+    assert 1 <= stats.steps < 10**6 and stats.seconds >= 0.2
+
+
+def test_loss_curve_stays_short_on_long_runs():
+    model, step_fn, _ = regression()
+    opt = torch.optim.SGD(model.parameters(), lr=0.01)
+    stats = train_loop(model, opt, step_fn, Budget(max_steps=3000, max_seconds=1e6, n_probes=0), quiet=True)
+    assert 100 < len(stats.loss_curve) <= 600
+
+
+def test_probes_are_log_spaced_in_eval_mode_and_not_charged_to_training():
+    model, step_fn, _ = regression()
+    model = torch.nn.Sequential(model, torch.nn.Dropout(0.5))
+    modes = []
+
+    def probe():
+        modes.append(model.training)
+        time.sleep(0.05)
+        return {"metric": 1.0}
+
+    opt = torch.optim.SGD(model.parameters(), lr=0.01)
+    stats = train_loop(model, opt, step_fn, Budget(max_steps=81, max_seconds=1e6, n_probes=4), probe_fn=probe,
+                       quiet=True)
+    assert [p["step"] for p in stats.probes] == [3, 9, 27, 81]
+    assert all(p["metric"] == 1.0 for p in stats.probes)
+    assert modes == [False] * 4
+    assert stats.extra["probe_seconds"] >= 0.2 and stats.seconds < stats.extra["probe_seconds"] + 10
+    assert probe_fractions(3) == [1 / 9, 1 / 3, 1]
+
+
+def test_probe_time_does_not_eat_the_wall_clock_budget():
+    model, step_fn, _ = regression()
+
+    def slow(step):
+        time.sleep(0.005)
+        return step_fn(step)
+
+    opt = torch.optim.SGD(model.parameters(), lr=0.01)
+    probe = lambda: time.sleep(0.3) or {}  # noqa: E731
+    stats = train_loop(model, opt, slow, Budget(max_steps=10**6, max_seconds=0.3, n_probes=3), probe_fn=probe,
+                       quiet=True)
+    assert len(stats.probes) == 3 and stats.extra["stop"] == "max_seconds"
+
+
+def test_schedule_factors_and_lr_applied():
+    cos = Schedule("cosine", final_ratio=0.1)
+    assert cos.factor(0.0) == pytest.approx(1.0) and cos.factor(1.0) == pytest.approx(0.1)
+    assert cos.factor(0.5) == pytest.approx(0.55)
+    exp = Schedule("exponential", final_ratio=0.01)
+    assert exp.factor(0.5) == pytest.approx(0.1)
+    assert Schedule("constant", warmup=0.2).factor(0.1) == pytest.approx(0.5)
+    model, step_fn, _ = regression()
+    opt = torch.optim.SGD(model.parameters(), lr=1.0)
+    stats = train_loop(model, opt, lambda s: 0.0 * step_fn(s), Budget(max_steps=100, max_seconds=1e6, n_probes=0),
+                       schedule=exp, quiet=True)
+    assert stats.extra["final_lr"] == pytest.approx(0.01 ** 0.99)
+    with pytest.raises(InputError):
+        Schedule("linear")
+    with pytest.raises(InputError):
+        Schedule.from_cfg({"lr_final_ratio": 0})
+
+
+def test_seeded_runs_are_identical():
+    weights = []
+    for _ in range(2):
+        model, step_fn, _ = regression(seed=3)
+        opt = torch.optim.Adam(model.parameters(), lr=0.01)
+        train_loop(model, opt, step_fn, Budget(max_steps=20, max_seconds=1e6, n_probes=0), quiet=True)
+        weights.append(model.weight.detach().clone())
+    assert torch.equal(weights[0], weights[1])
+
+
+def test_nan_guard_fires_on_forced_divergence():
+    model, step_fn, _ = regression()
+    opt = torch.optim.SGD(model.parameters(), lr=1e6)  # diverges: weights overflow within a few steps
+    stats = train_loop(model, opt, step_fn, Budget(max_steps=1000, max_seconds=1e6, n_probes=2),
+                       probe_fn=lambda: {"x": 0.0}, quiet=True)
+    assert stats.status == "failed" and stats.extra["stop"] == "nonfinite"
+    assert stats.message.startswith("step ") and "non-finite" in stats.message
+    assert stats.steps < 1000
+
+
+def test_nan_guard_catches_weights_that_go_bad_without_a_bad_loss():
+    model, step_fn, _ = regression()
+    opt = torch.optim.SGD(model.parameters(), lr=0.0)
+
+    def poison(step):
+        if step == 7:
+            with torch.no_grad():
+                model.bias.fill_(float("inf"))
+        return 0.0 * model.weight.sum()  # stays finite (0 * finite weights)
+
+    stats = train_loop(model, opt, poison, Budget(max_steps=200, max_seconds=1e6, n_probes=0),
+                       weight_check_every=10, quiet=True)
+    assert stats.status == "failed" and "bias" in stats.message and stats.message.startswith("step 10")
+
+
+def test_devices_and_budget_validation():
+    assert resolve_device("cpu") == "cpu"
+    assert resolve_device("auto") == ("cuda" if torch.cuda.is_available() else "cpu")
+    with pytest.raises(InputError):
+        resolve_device("tpu")
+    if not torch.cuda.is_available():
+        with pytest.raises(InputError):
+            resolve_device("cuda")
+    model, step_fn, _ = regression()
+    with pytest.raises(InputError):
+        train_loop(model, torch.optim.SGD(model.parameters(), lr=0.1), step_fn, Budget(max_steps=0))
