@@ -1,6 +1,7 @@
 """Command line: `python -m ddfbench [overrides]` (Hydra). A thin wrapper around runner.run.
 
-With no arguments at all it runs `+experiment=default` (every family on the bunny, small budget).
+Without `model=` or `+experiment=` it runs `+experiment=default` (every family, small budget) with the
+given overrides, so `python -m ddfbench shape=cow` compares every family on the cow.
 A single run that fails exits non-zero with a one-line error; in a sweep a failure is a `failed`
 record and the sweep goes on. Nothing here holds module-level state (launchers pickle the task).
 """
@@ -17,10 +18,11 @@ from hydra.experimental.callback import Callback
 from hydra.types import RunMode
 from omegaconf import DictConfig, OmegaConf
 
+CONF_DIR = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "conf")  # conf/ at the top level
 KEY_FILE = "ddfbench_key.txt"  # written in each Hydra job folder: which record the job produced
 
 
-@hydra.main(version_base="1.3", config_path="../conf", config_name="config")
+@hydra.main(version_base="1.3", config_path=CONF_DIR, config_name="config")
 def task(cfg: DictConfig) -> str:
     """One Hydra job: resolve the config, run it, return the record key."""
     from ddfbench import runner
@@ -60,8 +62,14 @@ class SweepTableCallback(Callback):
             print(to_markdown(summarize(records)))
 
 
+def wants_default_experiment(args: list[str]) -> bool:
+    """True when the command names no model, no experiment and no Hydra flag: run every family."""
+    named = ("model=", "+model=", "experiment=", "+experiment=", "-")
+    return not any(a.startswith(named) for a in args)
+
+
 def main() -> None:
-    """Entry point: no arguments means the default benchmark experiment."""
-    if len(sys.argv) == 1:
+    """Entry point. Without `model=` or `+experiment=`, run `+experiment=default` with the given overrides."""
+    if wants_default_experiment(sys.argv[1:]):
         sys.argv.append("+experiment=default")
     task()

@@ -8,7 +8,7 @@ per-sample jitter (zero for the pixel centre). fov_deg is the vertical field of 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -26,7 +26,7 @@ class Camera:
     fov_deg: float
     width: int
     height: int
-    up: np.ndarray = np.array([0.0, 1.0, 0.0])
+    up: np.ndarray = field(default_factory=lambda: np.array([0.0, 1.0, 0.0]))
 
     def basis(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Unit forward, right and up vectors (right-handed: right = forward × up)."""

@@ -147,8 +147,7 @@ def render(rep: Representation, scene: Scene, passes: Passes, seed: int) -> tupl
     origins, directions = primary_rays(scene, seed)
     hits = tracer.cast("primary", origins, directions, normals=passes.normals)
     centre = (slice(None), 0)
-    normal = np.where(hits.hit[:, None], hits.normal, 0).astype(np.float32) if passes.normals else \
-        np.zeros((len(hits.t), 3), np.float32)
+    normal = hits.normal if passes.normals else np.zeros((len(hits.t), 3), np.float32)  # zeros on misses
     frames = Frames(
         depth=hits.t.reshape(c, s, h, w)[centre].copy(),
         mask=hits.hit.reshape(c, s, h, w)[centre].copy(),

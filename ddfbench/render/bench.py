@@ -1,0 +1,115 @@
+"""Render-time benchmark, the DDF paper's Fig. 5 as a table and a plot: first vs later renders of
+the same scene, per representation, against the full mesh's BVH measured in the same process.
+
+    python -m ddfbench.render.bench                                  mesh LODs on the bunny, scene=depth
+    python -m ddfbench.render.bench --scene paper_fig4 --size 128 --renders 8 --plot fig5.png
+    python -m ddfbench.render.bench --model ddf=results/single/<key>/model.pt   a saved artifact of any family
+
+Columns: setup_s (build or load: mesh decimation + scene, or Family.load), render_1_s (the cold
+render: lazy setup such as the BVH commit or weights to the device included), later_median_s and
+later_iqr_s (renders 2..N), rays_per_s (primary + shadow + bounce rays of one render / later median),
+vs_bvh (the full mesh's later median / this one's: above 1 is faster than the BVH).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+
+import numpy as np
+from hydra import compose, initialize_config_dir
+from omegaconf import OmegaConf
+
+from ddfbench.models import load_family
+from ddfbench.oracle import Oracle
+from ddfbench.render.integrator import render
+from ddfbench.render.scene import parse_scene, plan_passes
+from ddfbench.render.timing import clock, compute_threads
+from ddfbench.representation import Budget, FitData, Representation
+from ddfbench.shapes import load_shape
+
+_CONF = os.path.join(os.path.dirname(__file__), "..", "..", "conf")
+
+
+def _config(group: str, name: str) -> dict:
+    with initialize_config_dir(config_dir=os.path.abspath(os.path.join(_CONF, group)), version_base="1.3"):
+        return OmegaConf.to_container(compose(config_name=name), resolve=True)
+
+
+def _mesh_rep(shape, faces: int) -> Representation:
+    rep = load_family("mesh")({"faces": faces})
+    rep.fit(FitData(None, shape.mesh, Oracle(shape.mesh)), Budget())
+    return rep
+
+
+def _row(name: str, setup_s: float, rep: Representation, scene, renders: int) -> dict:
+    passes = plan_passes(scene)
+    seconds, counts = [], None
+    for _ in range(renders):
+        start = clock()
+        _, c = render(rep, scene, passes, seed=0)
+        seconds.append(clock() - start)
+        counts = counts or c
+    later = seconds[1:] or seconds
+    q1, median, q3 = np.percentile(later, [25, 50, 75])
+    rays = counts["primary_rays"] + counts["shadow_rays"] + counts["bounce_rays"]
+    return {"name": name, "setup_s": setup_s, "render_1_s": seconds[0], "later_median_s": float(median),
+            "later_iqr_s": float(q3 - q1), "rays": rays, "rays_per_s": rays / median, "seconds": seconds}
+
+
+def main(argv: list[str] | None = None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--shape", default="bunny", help="a conf/shape preset")
+    ap.add_argument("--scene", default="depth", help="a conf/scene preset")
+    ap.add_argument("--size", type=int, default=128, help="image width and height")
+    ap.add_argument("--renders", type=int, default=6, help="renders per representation (the first is cold)")
+    ap.add_argument("--lods", default="10000,2000,500", help="mesh LOD face counts, comma-separated")
+    ap.add_argument("--model", action="append", default=[], metavar="FAMILY=PATH", help="a saved artifact to load")
+    ap.add_argument("--plot", help="write the per-render times as a PNG plot here")
+    args = ap.parse_args(argv)
+    if args.renders < 2:
+        ap.error("--renders must be at least 2 (first and later renders)")
+
+    shape = load_shape(_config("shape", args.shape))
+    scene = parse_scene({**_config("scene", args.scene), "width": args.size, "height": args.size})
+    rows = []
+    for faces in [0] + [int(f) for f in args.lods.split(",") if f.strip()]:
+        start = time.perf_counter()
+        rep = _mesh_rep(shape, faces)
+        rows.append(_row(f"mesh faces={len(rep.mesh.faces)}", time.perf_counter() - start, rep, scene, args.renders))
+    for spec in args.model:
+        family, _, path = spec.partition("=")
+        start = clock()
+        rep = load_family(family).load(path)
+        rows.append(_row(f"{family} {os.path.basename(path)}", clock() - start, rep, scene, args.renders))
+
+    bvh = rows[0]["later_median_s"]
+    print(f"shape={args.shape} scene={args.scene} {args.size}x{args.size} cameras={len(scene.cameras)} "
+          f"spp={scene.spp} renders={args.renders} threads={compute_threads()}")
+    print("| representation | setup_s | render_1_s | later_median_s | later_iqr_s | rays | rays_per_s | vs_bvh |")
+    print("|---|---|---|---|---|---|---|---|")
+    for r in rows:
+        print(f"| {r['name']} | {r['setup_s']:.4f} | {r['render_1_s']:.4f} | {r['later_median_s']:.4f} | "
+              f"{r['later_iqr_s']:.4f} | {r['rays']} | {r['rays_per_s']:.3g} | {bvh / r['later_median_s']:.2f} |")
+    if args.plot:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+
+        fig, ax = plt.subplots(figsize=(6, 4))
+        for r in rows:
+            ax.plot(range(1, args.renders + 1), r["seconds"], marker="o", label=r["name"])
+        ax.set_xticks(range(1, args.renders + 1))
+        ax.set(xlabel="render #", ylabel="seconds", yscale="log",
+               title=f"{args.shape}, scene={args.scene}, {args.size}² px: first vs later renders")
+        ax.legend(fontsize=8)
+        fig.tight_layout()
+        fig.savefig(args.plot, dpi=120)
+        print(f"plot: {args.plot}", file=sys.stderr)
+
+
+if __name__ == "__main__":
+    main()

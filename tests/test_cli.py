@@ -1,0 +1,83 @@
+"""End to end through the command line: single runs, resume, bad input, a sweep, the report."""
+
+import json
+import os
+import subprocess
+import sys
+
+import pytest
+
+from ddfbench.runs import RECORD_FIELDS, find_records
+
+SMALL = ["shape=cube", "model=mesh", "eval=smoke", "scene=none", "sampling=random", "sampling.n_samples=2000"]
+
+
+def ddfbench(args, out_dir, module="ddfbench"):
+    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    return subprocess.run([sys.executable, "-m", module, *args, f"out_dir={out_dir}"] if module == "ddfbench"
+                          else [sys.executable, "-m", module, *args], capture_output=True, text=True, env=env,
+                          timeout=600)
+
+
+def records(root):
+    return find_records(str(root))
+
+
+def test_single_run_writes_a_complete_record_and_resumes(tmp_path):
+    out = ddfbench(SMALL, tmp_path)
+    assert out.returncode == 0, out.stderr
+    (rec,) = records(tmp_path)
+    assert set(RECORD_FIELDS) <= set(rec)
+    assert rec["status"] == "ok" and rec["error"] is None
+    assert rec["family"] == "mesh" and rec["shape"]["name"] == "cube"
+    m = rec["metrics"]
+    assert m["chamfer_l2"] < 2 * m["noise_floor"]["chamfer_l2"]  # the full mesh is GT: at the floor
+    assert set(m["fscore"]) == {"0.005", "0.01", "0.02"}
+    assert rec["cost"]["storage_bytes"] == os.path.getsize(os.path.join(rec["_dir"], rec["artifacts"]["model"]))
+    for name in ("gt_mesh", "model", "reconstruction", "dataset"):
+        assert os.path.exists(os.path.normpath(os.path.join(rec["_dir"], rec["artifacts"][name]))), name
+    assert "CD-L2" in out.stdout  # the table is printed
+    again = ddfbench(SMALL, tmp_path)
+    assert again.returncode == 0
+    (same,) = records(tmp_path)
+    assert same["finished"] == rec["finished"] and same["started"] == rec["started"]  # skipped, not re-run
+    forced = ddfbench(SMALL + ["force=true"], tmp_path)
+    assert forced.returncode == 0
+    (redone,) = records(tmp_path)
+    assert redone["key"] == rec["key"] and redone["started"] >= rec["started"]
+    assert json.loads(json.dumps(redone["metrics"])) == redone["metrics"]
+
+
+@pytest.mark.parametrize("content,fragment", [(None, "does not exist"), (b"", "is empty"),
+                                              (b"v 0 0 0\nv 1 0 0\n", "no faces")])
+def test_bad_mesh_file_fails_cleanly(tmp_path, content, fragment):
+    path = tmp_path / "in" / "bad.obj"
+    if content is not None:
+        path.parent.mkdir()
+        path.write_bytes(content)
+    args = [a for a in SMALL if not a.startswith("shape=")] + ["shape=file", f"shape.path={path}"]
+    out = ddfbench(args, tmp_path / "res")
+    assert out.returncode != 0
+    last = out.stderr.strip().splitlines()[-1]
+    assert str(path) in last and fragment in last
+    (rec,) = records(tmp_path / "res")
+    assert rec["status"] == "failed" and str(path) in rec["error"]
+    leftovers = [f for _, _, fs in os.walk(tmp_path / "res") for f in fs if f.endswith(".tmp")]
+    assert leftovers == []
+
+
+def test_sweep_goes_on_after_a_failure_and_report_renders(tmp_path):
+    bad = tmp_path / "missing.obj"
+    args = [a for a in SMALL if not a.startswith(("shape=", "model="))]
+    out = ddfbench(["--multirun", "shape=cube,file", f"shape.path={bad}", "model=mesh,mesh_lod500",
+                    "experiment_name=sweep", *args], tmp_path)
+    assert out.returncode == 0, out.stderr
+    recs = records(tmp_path / "sweep")
+    assert sorted(r["status"] for r in recs) == ["failed", "failed", "ok", "ok"]
+    assert all(str(bad) in r["error"] for r in recs if r["status"] == "failed")
+    rep = ddfbench([str(tmp_path / "sweep"), "--out", str(tmp_path / "rep")], tmp_path, module="ddfbench.report")
+    assert rep.returncode == 0, rep.stderr
+    md = (tmp_path / "rep" / "table.md").read_text()
+    assert "mesh_lod500" in md and "failed" in md.lower()
+    assert (tmp_path / "rep" / "table.tex").read_text().startswith("\\begin{tabular}")
+    assert "chamfer_l2_mean" in (tmp_path / "rep" / "table.csv").read_text()
