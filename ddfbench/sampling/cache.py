@@ -1,0 +1,34 @@
+"""Where a dataset lives on disk: a hash of everything that determines its labels."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import re
+from typing import Any, Mapping
+
+import numpy as np
+
+from ddfbench.oracle import Oracle
+from ddfbench.shapes import Shape
+
+CACHE_VERSION = 1  # bump when a sampler's output changes for the same config
+
+
+def dataset_key(shape: Shape, oracle: Oracle, cfg: Mapping[str, Any], kind: str, seed: int) -> str:
+    """16 hex digits of sha256 over the shape (name, transform, vertex and face bytes), the sampling
+    config, kind, seed, the oracle's inside-test votes and CACHE_VERSION."""
+    h = hashlib.sha256()
+    head = {"shape": shape.name, "transform": shape.transform, "sampling": dict(cfg), "kind": kind, "seed": int(seed),
+            "occupancy_rays": oracle.occupancy_rays, "version": CACHE_VERSION}
+    h.update(json.dumps(head, sort_keys=True, default=str).encode())
+    h.update(np.ascontiguousarray(shape.mesh.vertices, np.float64).tobytes())
+    h.update(np.ascontiguousarray(shape.mesh.faces, np.int64).tobytes())
+    return h.hexdigest()[:16]
+
+
+def dataset_path(cache_dir: str, shape: Shape, strategy: str, kind: str, key: str) -> str:
+    """cache_dir/<shape>-<strategy>-<kind>-<key>.npz (shape name reduced to safe characters)."""
+    name = re.sub(r"[^A-Za-z0-9_.-]", "_", shape.name) or "shape"
+    return os.path.join(cache_dir, f"{name}-{strategy}-{kind}-{key}.npz")

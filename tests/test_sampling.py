@@ -1,0 +1,236 @@
+"""Samplers: every label checked against the second ray-cast backend or trimesh, paper-literal options, bad input."""
+
+import os
+
+import numpy as np
+import pytest
+import trimesh
+import yaml
+
+from ddfbench.errors import InputError
+from ddfbench.oracle import Oracle
+from ddfbench.samples import Samples
+from ddfbench.sampling import available_strategies, build
+from ddfbench.sampling.box import box_interval
+from ddfbench.sampling.directions import paper_eq10_directions, random_perpendicular, uniform_directions
+from ddfbench.sampling.steps import marching_distances
+from ddfbench.sampling.triangles import barycentric, face_plan
+from ddfbench.shapes import Shape, load_shape
+
+CONF = os.path.join(os.path.dirname(__file__), "..", "conf", "sampling")
+
+
+def config(strategy, **overrides):
+    """conf/sampling/<strategy>.yaml with the field box resolved and overrides applied."""
+    with open(os.path.join(CONF, f"{strategy}.yaml")) as f:
+        cfg = yaml.safe_load(f)
+    cfg["box"] = 0.6
+    cfg.update(overrides)
+    return cfg
+
+
+@pytest.fixture(scope="module")
+def cow():
+    return load_shape({"name": "cow"})
+
+
+def recheck_rays(shape, samples, rng, n=4000):
+    """Re-cast a random subset with the embree backend: finite labels within 1e-4, inf labels true misses."""
+    idx = rng.choice(len(samples), min(n, len(samples)), replace=False)
+    t_ref, _, _ = Oracle(shape.mesh, "embree").first_hit(samples.x[idx], samples.d[idx])
+    t = samples.t[idx]
+    assert np.array_equal(samples.hit, np.isfinite(samples.t))
+    assert np.all(np.isfinite(t_ref[~np.isfinite(t)]) == False)  # noqa: E712  every inf label is a miss
+    assert np.all(np.isfinite(t_ref[np.isfinite(t)]))
+    fin = np.isfinite(t)
+    assert np.abs(t[fin] - t_ref[fin]).max() <= 1e-4
+    assert np.allclose(np.linalg.norm(samples.d, axis=1), 1, atol=1e-5)
+    return fin.mean()
+
+
+RAY_CASES = [
+    ("surface", {}),
+    ("surface", {"face_mode": "per_face", "s_fc": 1, "s_dr": 3, "s_p": 3, "steps": "geometric"}),
+    ("surface", {"steps": "uniform", "directions": "paper_eq10", "barycentric": "paper_eq9"}),
+    ("random", {"n_samples": 20000}),
+    ("pov", {"resolution": 24}),
+    ("pov", {"resolution": 16, "s_p": 3, "steps": "geometric"}),
+]
+
+
+@pytest.mark.parametrize("strategy,overrides", RAY_CASES)
+def test_ray_labels_agree_with_second_backend(cow, rng, tmp_path, strategy, overrides):
+    samples, path, info = build(cow, Oracle(cow.mesh), config(strategy, **overrides), "rays", 0, str(tmp_path))
+    hit_share = recheck_rays(cow, samples, rng)
+    assert 0.05 < hit_share < 0.95  # both hits and misses are present
+    assert np.abs(samples.x).max() <= 0.6 + 1e-6
+    assert info["n_samples"] == len(samples) and info["memory_bytes"] > 0 and info["sampling_s"] > 0
+
+
+def test_surface_rejects_rays_into_the_mesh_and_occluded_ones(cow, tmp_path):
+    cfg = config("surface", face_mode="per_face", s_fc=1, s_dr=4, s_p=4, perpendicular=False)
+    samples, _, info = build(cow, Oracle(cow.mesh), cfg, "rays", 0, str(tmp_path))
+    rej = info["rejected"]
+    candidates = len(cow.mesh.faces) * 16
+    assert info["candidates"] == candidates
+    # about half the directions point into a closed mesh; a non-convex cow occludes some more
+    assert 0.4 < rej["inside"] / candidates < 0.6 and rej["occluded"] > 0
+    kept = candidates - sum(rej.values())
+    toward = samples.hit  # (p + t theta, -theta; t) samples; the others are the escape misses
+    assert toward.sum() == kept and (~toward).sum() <= kept
+    # a kept sample's label ray ends on the surface: its end point is (almost) on the mesh
+    end = samples.x[toward] + samples.t[toward, None] * samples.d[toward]
+    assert Oracle(cow.mesh).unsigned_distance(end[:2000]).max() < 1e-5
+
+
+@pytest.mark.parametrize("strategy,overrides", [("surface", {}), ("random", {"n_samples": 3000}), ("pov", {"resolution": 8})])
+def test_sdf_labels_agree_with_trimesh(rng, tmp_path, strategy, overrides):
+    bone = load_shape({"name": "bone"})
+    samples, path, info = build(bone, Oracle(bone.mesh), config(strategy, **overrides), "sdf", 0, str(tmp_path))
+    assert samples.sdf is not None and samples.sdf.shape == (len(samples),)
+    idx = rng.choice(len(samples), 300, replace=False)
+    ref = -trimesh.proximity.signed_distance(bone.mesh, samples.x[idx].astype(np.float64))  # trimesh: + inside
+    assert np.abs(samples.sdf[idx] - ref).max() < 1e-4
+    assert (samples.sdf < 0).mean() > 0.005  # inside points are present (the bone fills ~2 % of the box)
+    if strategy == "surface":  # narrow band: most points near the surface
+        assert np.median(np.abs(samples.sdf)) < 0.03
+
+
+def test_paper_eq9_leaves_the_triangle_default_does_not(rng):
+    a, b = barycentric(rng, 200000, "paper_eq9")
+    assert abs((a + b > 1).mean() - 0.5) < 0.01
+    a, b = barycentric(rng, 200000, "uniform")
+    assert (a + b > 1).sum() == 0
+    # uniform over the area: the corner triangle a + b < 1/2 holds a quarter of the area
+    assert abs((a + b < 0.5).mean() - 0.25) < 0.01
+
+
+def test_paper_eq10_crowds_the_poles_default_does_not(rng):
+    # caps |z| > 0.9 hold 10 % of the sphere's area; uniform angles put 2 arccos(0.9) / pi = 28.7 % there
+    for rule, expected in ((paper_eq10_directions, 2 * np.arccos(0.9) / np.pi), (uniform_directions, 0.1)):
+        d = rule(rng, 200000)
+        assert np.allclose(np.linalg.norm(d, axis=1), 1, atol=1e-6)
+        assert abs((np.abs(d[:, 2]) > 0.9).mean() - expected) < 0.005
+
+
+def test_paper_eq9_points_off_the_surface_are_caught(cow, rng, tmp_path):
+    cfg = config("surface", barycentric="paper_eq9")
+    samples, _, info = build(cow, Oracle(cow.mesh), cfg, "rays", 0, str(tmp_path))
+    assert info["rejected"]["verify"] > 0.05 * info["candidates"]  # their backward ray misses p
+    recheck_rays(cow, samples, rng)
+
+
+def test_perpendicular_directions(rng):
+    d = uniform_directions(rng, 1000)
+    u = random_perpendicular(rng, d)
+    assert np.abs((u * d).sum(1)).max() < 1e-5
+    assert np.allclose(np.linalg.norm(u, axis=1), 1, atol=1e-5)
+
+
+@pytest.mark.parametrize("rule", ["uniform", "stratified", "geometric"])
+def test_marching_distances_stay_in_range_and_ascend(rng, rule):
+    hi = rng.uniform(0.01, 1.0, 500)
+    t = marching_distances(rule, 8, 1e-3, hi, rng)
+    assert t.shape == (500, 8)
+    assert np.all(t >= 1e-3) and np.all(t <= hi[:, None] + 1e-12) and np.all(np.diff(t, axis=1) >= 0)
+    if rule == "geometric":  # half the samples within the geometric middle of the range
+        assert np.mean(t[:, 3] < np.sqrt(1e-3 * hi)) > 0.3
+
+
+def test_box_interval_matches_a_brute_force_march(rng):
+    o = rng.uniform(-1, 1, (200, 3))
+    d = uniform_directions(rng, 200).astype(np.float64)
+    t_in, t_out = box_interval(o, d, -0.5, 0.5)
+    s = np.linspace(-4, 4, 8001)
+    inside = np.all(np.abs(o[:, None] + s[None, :, None] * d[:, None]) <= 0.5, axis=2)
+    for i in range(200):
+        if inside[i].any():
+            assert abs(s[inside[i]].min() - t_in[i]) < 2e-3 and abs(s[inside[i]].max() - t_out[i]) < 2e-3
+        else:
+            assert t_in[i] > t_out[i]
+
+
+def test_face_plan_skips_zero_area_faces(rng):
+    v = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [2, 0, 0], [0, 0, 1]], float)
+    f = np.array([[0, 1, 2], [0, 1, 3], [0, 1, 4]])  # face 1 is degenerate (collinear)
+    mesh = trimesh.Trimesh(v, f, process=False)
+    per_face = face_plan(mesh, 3, "per_face", rng)
+    assert sorted(per_face.tolist()) == [0, 0, 0, 2, 2, 2]
+    total = face_plan(mesh, 1000, "total", rng)
+    assert len(total) == 2000 and 1 not in total
+    assert abs((total == 0).mean() - 0.5) < 0.05  # both faces have area 1/2
+
+
+def test_open_mesh_still_samples_and_reports_rejections(rng, tmp_path):
+    shape = load_shape({"name": "bunny10k"})
+    samples, _, info = build(shape, Oracle(shape.mesh), config("surface"), "rays", 0, str(tmp_path))
+    assert not shape.watertight and len(samples) > 0 and info["rejected"]["inside"] > 0
+    recheck_rays(shape, samples, rng)
+
+
+def test_cache_reuses_the_dataset(sphere, tmp_path):
+    cfg = config("random", n_samples=1000)
+    s1, p1, i1 = build(sphere, Oracle(sphere.mesh), cfg, "rays", 3, str(tmp_path))
+    s2, p2, i2 = build(sphere, Oracle(sphere.mesh), cfg, "rays", 3, str(tmp_path))
+    assert p1 == p2 and not i1["cache_hit"] and i2["cache_hit"]
+    assert np.array_equal(s1.x, s2.x) and np.array_equal(s1.t, s2.t) and i2["n_samples"] == 1000
+    _, p3, i3 = build(sphere, Oracle(sphere.mesh), cfg, "rays", 4, str(tmp_path))
+    assert p3 != p1 and not i3["cache_hit"]
+    _, p4, _ = build(sphere, Oracle(sphere.mesh), dict(cfg, n_samples=999), "rays", 3, str(tmp_path))
+    assert p4 != p1
+    loaded = Samples.load_npz(p1)
+    with np.load(p1) as z:
+        assert {"x", "d", "t", "hit"} <= set(z.files)
+    assert loaded.meta["strategy"] == "random" and len(loaded) == 1000
+
+
+@pytest.mark.parametrize("key,value", [("s_fc", 0), ("s_dr", 2.5), ("s_p", -1), ("s_fc", True), ("steps", "spiral"),
+                                       ("t_min", 0), ("face_mode", "some")])
+def test_bad_surface_values(sphere, tmp_path, key, value):
+    with pytest.raises(InputError, match=f"sampling.{key}"):
+        build(sphere, Oracle(sphere.mesh), config("surface", **{key: value}), "rays", 0, str(tmp_path))
+
+
+def test_unknown_strategy_lists_the_available_ones(sphere, tmp_path):
+    assert available_strategies() == ["pov", "random", "surface"]
+    with pytest.raises(InputError, match="pov, random, surface"):
+        build(sphere, Oracle(sphere.mesh), {"strategy": "spiral"}, "rays", 0, str(tmp_path))
+
+
+def test_unknown_and_missing_keys(sphere, tmp_path):
+    with pytest.raises(InputError, match="unknown key.*s_pp"):
+        build(sphere, Oracle(sphere.mesh), config("surface", s_pp=3), "rays", 0, str(tmp_path))
+    cfg = config("surface")
+    del cfg["s_p"]
+    with pytest.raises(InputError, match="missing key.*s_p"):
+        build(sphere, Oracle(sphere.mesh), cfg, "rays", 0, str(tmp_path))
+
+
+def test_camera_inside_the_shape(sphere, tmp_path):
+    with pytest.raises(InputError, match="inside shape sphere"):
+        build(sphere, Oracle(sphere.mesh), config("pov", radius=0.2, resolution=4), "rays", 0, str(tmp_path))
+
+
+def test_every_ray_rejected_is_an_error(sphere, tmp_path):
+    # a field box smaller than the sphere: every surface point lies outside it
+    with pytest.raises(InputError, match="no samples.*outside_box"):
+        build(sphere, Oracle(sphere.mesh), config("surface", box=0.2), "rays", 0, str(tmp_path))
+
+
+def test_too_many_samples_is_an_error(sphere, tmp_path):
+    with pytest.raises(InputError, match="max_samples"):
+        build(sphere, Oracle(sphere.mesh), config("surface", max_samples=1000), "rays", 0, str(tmp_path))
+    assert not os.listdir(tmp_path)
+
+
+def test_zero_area_faces_of_an_unvalidated_mesh_are_never_sampled(rng, tmp_path):
+    box = trimesh.creation.box(extents=(0.8, 0.8, 0.8))
+    v = np.vstack([box.vertices, [[0.4, 0.4, 0.4]]])  # a sliver face: two corners and a repeated corner
+    f = np.vstack([box.faces, [[0, 0, 1]]])
+    mesh = trimesh.Trimesh(v, f, process=False)
+    shape = Shape(mesh=mesh, name="box_sliver", source="test", transform={"center": [0, 0, 0], "scale": 1.0},
+                  watertight=False)
+    cfg = config("surface", face_mode="per_face", s_fc=5)
+    samples, _, info = build(shape, Oracle(mesh), cfg, "rays", 0, str(tmp_path))
+    assert info["n_points"] == 5 * 12
+    recheck_rays(shape, samples, rng)
