@@ -26,23 +26,38 @@ def nearest_distance(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarr
     return dist, idx
 
 
+def _empty(*clouds: np.ndarray) -> bool:
+    return any(len(c) == 0 for c in clouds)
+
+
 def sided_distance(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Squared distance (N,) from each point of a (N,3) to the nearest point of b (M,3) (paper Eq. 15)."""
+    """Squared distance (N,) from each point of a (N,3) to the nearest point of b (M,3) (paper Eq. 15).
+
+    An empty b puts every point of a at the penalty distance.
+    """
+    if len(b) == 0:
+        return np.full(len(a), PENALTY_DISTANCE**2)
     return nearest_distance(a, b)[0] ** 2
 
 
 def chamfer_distance(a: np.ndarray, b: np.ndarray, w1: float = 1.0, w2: float = 1.0) -> float:
-    """Chamfer L2 (paper Eq. 14): w1·mean sided(a, b) + w2·mean sided(b, a), squared distances."""
+    """Chamfer L2 (paper Eq. 14): w1·mean sided(a, b) + w2·mean sided(b, a); (w1+w2)·D² if a cloud is empty."""
+    if _empty(a, b):
+        return float((w1 + w2) * PENALTY_DISTANCE**2)
     return float(w1 * sided_distance(a, b).mean() + w2 * sided_distance(b, a).mean())
 
 
 def chamfer_l1(a: np.ndarray, b: np.ndarray) -> float:
-    """½(mean distance a→b + mean distance b→a), unsquared (Occupancy Networks)."""
+    """½(mean distance a→b + mean distance b→a), unsquared (Occupancy Networks); D if a cloud is empty."""
+    if _empty(a, b):
+        return PENALTY_DISTANCE
     return float(0.5 * (nearest_distance(a, b)[0].mean() + nearest_distance(b, a)[0].mean()))
 
 
 def precision_recall(gt: np.ndarray, pred: np.ndarray, radius: float) -> tuple[float, float]:
-    """precision = share of pred within radius of gt; recall = share of gt within radius of pred."""
+    """precision = share of pred within radius of gt; recall = share of gt within radius of pred (0 if empty)."""
+    if _empty(gt, pred):
+        return 0.0, 0.0
     d_pred, _ = nearest_distance(pred, gt)
     d_gt, _ = nearest_distance(gt, pred)
     return float((d_pred <= radius).mean()), float((d_gt <= radius).mean())
@@ -96,7 +111,9 @@ def point_to_surface(points: np.ndarray, mesh: trimesh.Trimesh) -> np.ndarray:
 
 
 def cloud_metrics(gt: np.ndarray, rec: np.ndarray, radii: Sequence[float]) -> dict[str, Any]:
-    """Chamfer L2/L1, f-score per radius and sided distances between two point clouds."""
+    """Chamfer L2/L1, f-score per radius and sided distances between two point clouds (penalty if one is empty)."""
+    if _empty(gt, rec):
+        return penalty_metrics(radii)
     d_gr, _ = nearest_distance(gt, rec)
     d_rg, _ = nearest_distance(rec, gt)
     out: dict[str, Any] = {

@@ -3,9 +3,10 @@
 Backends: "open3d" (RaycastingScene, Embree inside; the default) and "embree"
 (embreex through trimesh; ray casts only, for cross-checking). Occupancy and
 signed distance always come from open3d: each point casts `occupancy_rays`
-random rays and takes the majority of their odd-even parities, so a mesh with
-holes still gets a sensible inside test (a single ray would flip wherever it
-slips through a hole).
+random rays of its own and takes the majority of their odd-even parities, so a
+mesh with holes still gets a sensible inside test (a single ray would flip
+wherever it slips through a hole). Random directions almost never graze an
+edge, so the parities use open3d's raw crossing counts.
 """
 
 from __future__ import annotations
@@ -79,11 +80,27 @@ class Oracle:
         return t, tri, normal
 
     def count_crossings(self, origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
-        """Number of surface crossings along each ray (N,) int64 (open3d)."""
+        """Number of surface crossings along each ray (N,) int64.
+
+        open3d lists every triangle a ray touches, so a ray through a shared edge or vertex would
+        count 2 to 6 times: hits on one ray whose t agree within 1e-6·(1 + t) are one crossing.
+        """
         rays = np.hstack([_f32(origins).reshape(-1, 3), _f32(directions).reshape(-1, 3)])
-        out = [self._scene.count_intersections(o3d.core.Tensor(rays[s : s + _CHUNK])).numpy()
-               for s in range(0, len(rays), _CHUNK)]
-        return np.concatenate(out).astype(np.int64) if out else np.zeros(0, np.int64)
+        out = np.zeros(len(rays), np.int64)
+        for s in range(0, len(rays), _CHUNK):
+            chunk = rays[s : s + _CHUNK]
+            ans = self._scene.list_intersections(o3d.core.Tensor(chunk))
+            ray_ids = ans["ray_ids"].numpy().astype(np.int64)
+            t = ans["t_hit"].numpy().astype(np.float64)
+            if len(t) == 0:
+                continue
+            order = np.lexsort((t, ray_ids))
+            ray_ids, t = ray_ids[order], t[order]
+            new = np.ones(len(t), bool)
+            same_ray = ray_ids[1:] == ray_ids[:-1]
+            new[1:] = ~same_ray | (t[1:] - t[:-1] > 1e-6 * (1.0 + t[1:]))
+            out[s : s + len(chunk)] = np.bincount(ray_ids[new], minlength=len(chunk))
+        return out
 
     # ---- points -----------------------------------------------------------------------------
     def _points(self, fn, points: np.ndarray, **kw) -> np.ndarray:
@@ -91,10 +108,24 @@ class Oracle:
         out = [fn(o3d.core.Tensor(p[s : s + _CHUNK]), **kw).numpy() for s in range(0, len(p), _CHUNK)]
         return np.concatenate(out) if out else np.zeros(0, np.float32)
 
-    def occupancy(self, points: np.ndarray) -> np.ndarray:
-        """Inside test (N,) bool: majority vote of `occupancy_rays` random rays' parities."""
-        occ = self._points(self._scene.compute_occupancy, points, nsamples=self.occupancy_rays)
-        return occ > 0.5
+    def occupancy(self, points: np.ndarray, seed: int = 0) -> np.ndarray:
+        """Inside test (N,) bool: majority of the crossing parities of `occupancy_rays` rays per point.
+
+        Every point draws its own seeded random directions: open3d's compute_occupancy reuses a few
+        directions for all points, so on a mesh with holes its mistakes cluster in whole regions.
+        """
+        p = _f32(points).reshape(-1, 3)
+        k = self.occupancy_rays
+        rng = np.random.default_rng(seed)
+        votes = np.zeros(len(p), np.int64)
+        for s in range(0, len(p), max(1, _CHUNK // k)):
+            q = p[s : s + max(1, _CHUNK // k)]
+            d = rng.normal(size=(len(q) * k, 3)).astype(np.float32)
+            d /= np.linalg.norm(d, axis=1, keepdims=True)
+            rays = np.hstack([np.repeat(q, k, axis=0), d])
+            odd = self._scene.count_intersections(o3d.core.Tensor(rays)).numpy() % 2
+            votes[s : s + len(q)] = odd.reshape(len(q), k).sum(axis=1)
+        return votes * 2 > k
 
     def unsigned_distance(self, points: np.ndarray) -> np.ndarray:
         """Exact distance to the surface (N,) float32."""

@@ -92,10 +92,13 @@ class Representation(abc.ABC):
 
     cfg is the `model` config node as a plain dict; domain is the half-side of the field box.
     `sample_kind` says what training samples fit wants: "rays" (x, d, t, hit), "sdf" (x, sdf) or None.
+    `needs_closed_surface` says its labels rely on a sensible inside/outside (flagged on open meshes).
     """
 
     family: ClassVar[str] = "abstract"
     sample_kind: ClassVar[str | None] = None
+    # True where training signs come from the inside test: an open input is then flagged in the record.
+    needs_closed_surface: ClassVar[bool] = False
 
     def __init__(self, cfg: Mapping[str, Any], domain: float = 0.6):
         self.cfg = dict(cfg)

@@ -76,6 +76,8 @@ def _stages(cfg: Mapping[str, Any], rdir: str, device: str, seed: int, out: dict
     out["shape"] = shape.summary()
     oracle = Oracle(shape.mesh, **cfg.get("oracle", {}))
     Family = load_family(str(cfg["model"]["family"]))
+    if Family.needs_closed_surface and not shape.watertight:
+        out["flags"].append("non_watertight_input")
     os.makedirs(rdir, exist_ok=True)
     shape.mesh.export(os.path.join(rdir, "gt_mesh.ply"), file_type="ply", encoding="binary")
     artifacts["gt_mesh"] = "gt_mesh.ply"

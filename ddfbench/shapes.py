@@ -84,8 +84,10 @@ PROCEDURAL: dict[str, Callable[..., trimesh.Trimesh]] = {
 
 
 def catalog() -> list[str]:
-    """Every built-in shape name."""
-    return sorted(PYMESHLAB_SAMPLES) + sorted(PROCEDURAL)
+    """Every built-in shape name (the hard cases under hard/...)."""
+    from ddfbench.hard_shapes import HARD
+
+    return sorted(PYMESHLAB_SAMPLES) + sorted(PROCEDURAL) + sorted(HARD)
 
 
 def read_mesh_file(path: str) -> trimesh.Trimesh:
@@ -129,12 +131,15 @@ def validate(mesh: trimesh.Trimesh, label: str) -> tuple[trimesh.Trimesh, list[s
     if f.min() < 0 or f.max() >= len(v):
         raise InputError(f"{label}: faces index vertices that do not exist")
     warnings: list[str] = []
-    tri = v[f]
-    area2 = np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
-    extent = float(np.ptp(v[np.unique(f)], axis=0).max()) if len(f) else 0.0
+    extent = float(np.ptp(v[np.unique(f)], axis=0).max())
     if extent <= 0.0:
         raise InputError(f"{label}: all vertices coincide (zero-size bounding box)")
-    degenerate = area2 <= (1e-12 * extent) ** 2
+    offset = float(np.abs(v[np.unique(f)]).max())
+    if extent < 1e-12 * max(1.0, offset):
+        raise InputError(f"{label}: extent {extent:g} is too small for its offset {offset:g} (float64 precision lost)")
+    tri = v[f] - v[f].mean(axis=(0, 1))
+    area2 = np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+    degenerate = area2 <= 1e-12 * extent**2  # faces below ~1e-6 of the extent on a side
     if degenerate.all():
         raise InputError(f"{label}: every face has zero area")
     if degenerate.any():
@@ -154,9 +159,13 @@ def validate(mesh: trimesh.Trimesh, label: str) -> tuple[trimesh.Trimesh, list[s
         warnings.append(f"removed {int((~used).sum())} unreferenced vertices")
         remap = np.cumsum(used) - 1
         v, f = v[used], remap[f]
-    center = 0.5 * (v.min(axis=0) + v.max(axis=0))
-    if extent < 1e-12 * max(1.0, float(np.abs(center).max())):
-        raise InputError(f"{label}: extent {extent:g} is too small for its offset {np.abs(center).max():g} (precision lost)")
+    mesh = trimesh.Trimesh(v, f, process=False)
+    if not mesh.is_winding_consistent:
+        before = mesh.faces.copy()
+        trimesh.repair.fix_winding(mesh)
+        flipped = int((mesh.faces != before).any(axis=1).sum())
+        warnings.append(f"re-wound {flipped} faces that were wound against their neighbours")
+        f = np.asarray(mesh.faces)
     return trimesh.Trimesh(v, f, process=False), warnings
 
 
@@ -183,9 +192,16 @@ def load_shape(cfg: Mapping[str, Any]) -> Shape:
     elif name in PYMESHLAB_SAMPLES:
         source = os.path.join(pymeshlab_samples_dir(), PYMESHLAB_SAMPLES[name])
         raw, label = read_mesh_file(source), f"shape {name} ({source})"
-    elif name in PROCEDURAL:
+    elif name in PROCEDURAL or name.startswith("hard/"):
+        builders = PROCEDURAL
+        if name.startswith("hard/"):
+            from ddfbench.hard_shapes import HARD  # the hard-case catalog builds on this module
+
+            if name not in HARD:
+                raise InputError(f"shape '{name}': unknown hard case (one of {', '.join(sorted(HARD))})")
+            builders = HARD
         try:
-            raw = PROCEDURAL[name](**params)
+            raw = builders[name](**params)
         except TypeError as exc:
             raise InputError(f"shape {name}: bad params {params} ({exc})") from None
         label, source = f"shape {name}", "procedural"

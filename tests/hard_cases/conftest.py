@@ -1,0 +1,87 @@
+"""Fixtures of the hard-case suite: `hard/...` shapes as normalized Shapes, oracles, ray helpers."""
+
+import numpy as np
+import pytest
+import torch
+
+from ddfbench.hard_shapes import HARD
+from ddfbench.models import available_families
+from ddfbench.shapes import Shape, load_shape, normalize, validate
+
+torch.set_num_threads(1)
+
+
+def hard_shape(name: str, **params) -> Shape:
+    """A `hard/...` catalog shape, validated and normalized exactly as shapes.load_shape does for any mesh."""
+    mesh, warnings = validate(HARD[name](**params), f"shape {name}")
+    mesh, transform = normalize(mesh)
+    return Shape(mesh=mesh, name=name, source="procedural", transform=transform,
+                 watertight=bool(mesh.is_watertight), warnings=warnings)
+
+
+def unit(v: np.ndarray) -> np.ndarray:
+    """Rows of v (N,3) scaled to unit length."""
+    v = np.asarray(v, np.float64)
+    return v / np.linalg.norm(v, axis=-1, keepdims=True)
+
+
+def has_family(name: str) -> bool:
+    return name in available_families()
+
+
+@pytest.fixture(scope="session")
+def cube():
+    return load_shape({"name": "cube"})
+
+
+@pytest.fixture(scope="session")
+def sphere():
+    return load_shape({"name": "sphere"})
+
+
+def ray_backends(mesh):
+    """Every exact ray caster of a mesh: name -> fn(origins, directions) -> (t, hit, normal)."""
+    from ddfbench.models.mesh import MeshFamily
+    from ddfbench.oracle import Oracle
+    from ddfbench.representation import Budget, FitData
+
+    def oracle_fn(backend):
+        orc = Oracle(mesh, backend)
+
+        def cast(o, d):
+            t, tri, n = orc.first_hit(o, d)
+            return t, tri >= 0, n
+
+        return cast
+
+    rep = MeshFamily({"faces": 0, "backend": "open3d"})
+    rep.fit(FitData(samples=None, mesh=mesh, oracle=None), Budget())
+
+    def family_cast(o, d):
+        h = rep.intersect(o, d)
+        return h.t, h.hit, h.normal
+
+    return {"oracle-open3d": oracle_fn("open3d"), "oracle-embree": oracle_fn("embree"), "mesh-family": family_cast}
+
+
+def assert_well_formed(t, hit, normal):
+    """No NaN anywhere; hit <=> finite t >= 0; unit normals on hits, zero normals on misses."""
+    assert not np.isnan(t).any() and np.isfinite(normal).all()
+    assert np.array_equal(hit, np.isfinite(t))
+    assert np.all(t[hit] >= 0)
+    assert np.allclose(np.linalg.norm(normal[hit], axis=1), 1.0, atol=1e-5)
+    assert np.all(normal[~hit] == 0)
+
+
+def compose(*overrides: str, out_dir) -> dict:
+    """The resolved run config (plain dict) for CLI-style overrides, as `python -m ddfbench` would build it."""
+    import os
+
+    from hydra import compose as hydra_compose, initialize_config_dir
+    from omegaconf import OmegaConf
+
+    conf = os.path.join(os.path.dirname(__file__), "..", "..", "conf")
+    with initialize_config_dir(config_dir=os.path.abspath(conf), version_base="1.3"):
+        cfg = hydra_compose("config", overrides=["scene=none", "eval=smoke", "threads=1", f"out_dir={out_dir}",
+                                                 *overrides])
+    return OmegaConf.to_container(cfg, resolve=True)

@@ -1,0 +1,90 @@
+"""Case 12: empty and single-point reconstructions in every metric.
+
+Promise: geometry_metrics gives the documented penalty (chamfer L2 = 2 D^2, chamfer L1 = D, f-scores 0,
+D = the domain diagonal 2*0.6*sqrt(3)) and empty_reconstruction = True for a reconstruction with no
+faces, no area or non-finite vertices, and the runner adds the flag to the record. Every point-cloud
+metric, given an empty cloud, returns that same penalty instead of NaN, inf or an exception; a
+single point or a single triangle gives finite values.
+"""
+
+import numpy as np
+import pytest
+import trimesh
+
+from ddfbench import metrics
+from ddfbench.extract import empty_mesh
+from ddfbench.shapes import load_shape
+
+RADII = [0.005, 0.01, 0.02]
+D = 2 * 0.6 * np.sqrt(3.0)
+
+
+@pytest.fixture(scope="module")
+def gt():
+    return load_shape({"name": "bone"}).mesh
+
+
+def degenerate_reconstructions():
+    v = np.array([[0.0, 0, 0], [0.1, 0, 0], [0.2, 0, 0]])
+    return {
+        "no faces": empty_mesh(),
+        "zero area": trimesh.Trimesh(v, [[0, 1, 2]], process=False),
+        "nan vertices": trimesh.Trimesh(np.full((3, 3), np.nan), [[0, 1, 2]], process=False),
+    }
+
+
+@pytest.mark.parametrize("kind", list(degenerate_reconstructions()))
+def test_empty_reconstruction_gets_the_penalty(gt, kind):
+    m = metrics.geometry_metrics(gt, degenerate_reconstructions()[kind], 2000, RADII, seed=0)
+    assert m["empty_reconstruction"] is True
+    assert m["chamfer_l2"] == pytest.approx(2 * D**2) and m["chamfer_l1"] == pytest.approx(D)
+    assert all(v == 0.0 for v in m["fscore"].values())
+    assert all(np.isfinite(v) for v in (m["sided_gt_to_rec"]["mean"], m["sided_rec_to_gt"]["p95"]))
+
+
+def test_single_triangle_reconstruction_is_finite(gt):
+    tiny = trimesh.Trimesh([[0.0, 0, 0], [1e-3, 0, 0], [0, 1e-3, 0]], [[0, 1, 2]], process=False)
+    m = metrics.geometry_metrics(gt, tiny, 2000, RADII, seed=0)
+    assert m["empty_reconstruction"] is False
+    assert 0 < m["chamfer_l2"] < 2 * D**2 and np.isfinite(m["p2s_chamfer_l2"])
+    assert all(0.0 <= v <= 1.0 for v in m["fscore"].values())
+
+
+def test_single_point_cloud_is_finite(gt):
+    a = metrics.sample_surface(gt, 500, 0)[0]
+    one = np.zeros((1, 3))
+    for value in (metrics.chamfer_distance(a, one), metrics.chamfer_l1(a, one), metrics.f_score(a, one, 0.01)):
+        assert np.isfinite(value)
+    m = metrics.cloud_metrics(a, one, RADII)
+    assert np.isfinite(m["chamfer_l2"]) and np.isfinite(m["sided_rec_to_gt"]["mean"])
+
+
+EMPTY_CLOUD_METRICS = {
+    "chamfer_distance": lambda a, e: metrics.chamfer_distance(a, e),
+    "chamfer_l1": lambda a, e: metrics.chamfer_l1(a, e),
+    "f_score": lambda a, e: metrics.f_score(a, e, 0.01),
+    "cloud_metrics.chamfer_l2": lambda a, e: metrics.cloud_metrics(a, e, RADII)["chamfer_l2"],
+}
+
+
+@pytest.mark.parametrize("name", list(EMPTY_CLOUD_METRICS))
+def test_empty_point_cloud_gets_the_penalty(gt, name):
+    """BUG (ddfbench/metrics.py: nearest_distance and every cloud metric built on it): an empty (0, 3)
+    cloud gives inf distances (cKDTree on no points) and NaN means (mean of nothing), with a
+    RuntimeWarning, instead of the penalty. Fix: in chamfer_distance, chamfer_l1, precision_recall
+    (f_score) and cloud_metrics, return the penalty_metrics value when either cloud has no points."""
+    a = metrics.sample_surface(gt, 500, 0)[0]
+    value = EMPTY_CLOUD_METRICS[name](a, np.zeros((0, 3)))
+    expected = {"chamfer_distance": 2 * D**2, "chamfer_l1": D, "f_score": 0.0}.get(name, 2 * D**2)
+    assert np.isfinite(value) and value == pytest.approx(expected)
+
+
+def test_runner_flags_an_empty_reconstruction(tmp_path, monkeypatch):
+    from ddfbench.models.mesh import MeshFamily
+    from ddfbench.runner import run
+    from tests.hard_cases.conftest import compose
+
+    monkeypatch.setattr(MeshFamily, "to_mesh", lambda self, resolution: empty_mesh())
+    rec = run(compose("shape=cube", "model=mesh", out_dir=tmp_path))
+    assert rec["status"] == "ok" and "empty_reconstruction" in rec["flags"]
+    assert rec["metrics"]["chamfer_l2"] == pytest.approx(2 * D**2)
