@@ -9,7 +9,6 @@ from ddfbench.errors import InputError
 from ddfbench.representation import Budget
 from ddfbench.train import Schedule, probe_fractions, resolve_device, seed_everything, train_loop
 
-torch.set_num_threads(1)
 
 
 def regression(seed=0):

@@ -1,17 +1,48 @@
-"""`python -m ddfbench.report results/<experiment> [--out reports/<experiment>]`: tables from run records."""
+"""`python -m ddfbench.report results/<experiment> [--out reports/<experiment>] [--note TEXT] [--plots K,...]`
+
+Writes, from the run records below the folder:
+  table.md, table.csv, table.tex   one row per configuration (ddfbench.report.tables)
+  <kind>.png, <kind>.pdf           the experiment's plots (ddfbench.report.plots: PLOTS_BY_EXPERIMENT)
+  report.md                        the note, the sweep's status (runs done / failed / missing), the
+                                   table, the plots, and every record key the table was built from
+`--status [OVERRIDE ...]` prints which runs of the sweep are done, failed or missing instead
+(ddfbench.report.status).
+"""
 
 from __future__ import annotations
 
 import argparse
 import os
 import sys
+from collections import Counter
+from typing import Any
 
+from ddfbench.report.plots import PLOTS, plots_for, write_plots
 from ddfbench.report.tables import summarize, to_csv, to_latex, to_markdown
 from ddfbench.runs import find_records
 
 
-def write_report(records_dir: str, out_dir: str) -> str:
-    """Write table.md, table.csv and table.tex for the records below records_dir; return the markdown."""
+def _experiment(records: list[dict[str, Any]], records_dir: str) -> str:
+    names = Counter(str(r.get("experiment")) for r in records)
+    return names.most_common(1)[0][0] if names else os.path.basename(os.path.normpath(records_dir))
+
+
+def _sweep_lines(records_dir: str) -> list[str]:
+    """The sweep's status (done / failed / missing), or one line saying why it is unknown."""
+    try:
+        from ddfbench.report import status
+    except ImportError:
+        return []
+    try:
+        st = status.sweep_status(records_dir)
+    except Exception as exc:  # the status is an extra: a report is still written without it
+        return [f"Sweep status unknown ({type(exc).__name__}: {str(exc).strip().splitlines()[0] if str(exc) else ''})."]
+    return ["```", status.format_status(records_dir, st), "```"]
+
+
+def write_report(records_dir: str, out_dir: str, note: str | None = None,
+                 kinds: tuple[str, ...] | None = None) -> str:
+    """Write the tables, plots and report.md for the records below records_dir; return the markdown table."""
     records = find_records(records_dir)
     df = summarize(records)
     os.makedirs(out_dir, exist_ok=True)
@@ -21,20 +52,52 @@ def write_report(records_dir: str, out_dir: str) -> str:
     with open(os.path.join(out_dir, "table.tex"), "w") as fh:
         fh.write(to_latex(df))
     to_csv(df, os.path.join(out_dir, "table.csv"))
+    experiment = _experiment(records, records_dir)
+    written = write_plots(records, out_dir, kinds if kinds is not None else plots_for(experiment))
+    lines = [f"# {experiment}", ""]
+    if note:
+        lines += [f"**{note}**", ""]
+    shas = sorted({str((r.get("env") or {}).get("git_sha")) for r in records})
+    lines += [f"{len(records)} run records from `{records_dir}` (code: {', '.join(shas) or 'unknown'}).", ""]
+    lines += _sweep_lines(records_dir) + ["", md]
+    lines += [f"![{os.path.basename(p)}]({os.path.basename(p)})" for p in written if p.endswith(".png")]
+    lines += ["", "Record keys (config hashes) per row:", ""]
+    if not df.empty:
+        lines += [f"- {row['model']} {row['shape']}: {row['keys']}" for _, row in df.iterrows()]
+    with open(os.path.join(out_dir, "report.md"), "w") as fh:
+        fh.write("\n".join(lines) + "\n")
     return md
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m ddfbench.report", description=__doc__)
+    parser = argparse.ArgumentParser(prog="python -m ddfbench.report", description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("records", help="folder of run records, e.g. results/ablation")
     parser.add_argument("--out", help="report folder (default: reports/<name of the records folder>)")
+    parser.add_argument("--note", help="a line written at the top of report.md (e.g. 'reduced budget: ...')")
+    parser.add_argument("--plots", help=f"comma-separated plot kinds ({', '.join(PLOTS)}; 'none' for no plot); "
+                                        "default: by the experiment's name")
+    parser.add_argument("--status", nargs="*", metavar="OVERRIDE",
+                        help="print done / failed / missing runs of the sweep instead of writing a report")
     args = parser.parse_args(argv)
+    if args.status is not None:
+        from ddfbench.report import status
+
+        return status.main(args.records, args.status)
     if not os.path.isdir(args.records):
         print(f"ddfbench.report: {args.records}: no such folder of run records", file=sys.stderr)
         return 2
+    kinds = None
+    if args.plots:
+        kinds = tuple(k for k in args.plots.split(",") if k and k != "none")
+        unknown = [k for k in kinds if k not in PLOTS]
+        if unknown:
+            print(f"ddfbench.report: --plots {','.join(unknown)}: unknown kind (valid: {', '.join(PLOTS)})",
+                  file=sys.stderr)
+            return 2
     out = args.out or os.path.join("reports", os.path.basename(os.path.normpath(args.records)))
-    print(write_report(args.records, out))
-    print(f"wrote {out}/table.md, table.csv, table.tex")
+    print(write_report(args.records, out, note=args.note, kinds=kinds))
+    print(f"wrote {out}/report.md, table.md, table.csv, table.tex and plots")
     return 0
 
 
