@@ -18,19 +18,21 @@ from hydra.experimental.callback import Callback
 from hydra.types import RunMode
 from omegaconf import DictConfig, OmegaConf
 
-CONF_DIR = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "conf")  # conf/ at the top level
+from ddfbench import CONF_DIR
+
 KEY_FILE = "ddfbench_key.txt"  # written in each Hydra job folder: which record the job produced
 
 
 @hydra.main(version_base="1.3", config_path=CONF_DIR, config_name="config")
 def task(cfg: DictConfig) -> str:
     """One Hydra job: resolve the config, run it, return the record key."""
-    from ddfbench import runner
+    from ddfbench import launch, runner
     from ddfbench.report.tables import summarize, to_markdown
 
     hc = HydraConfig.get()
     plain: dict[str, Any] = OmegaConf.to_container(cfg, resolve=True)  # type: ignore[assignment]
-    record = runner.run(plain, choices=dict(hc.runtime.choices), overrides=list(hc.overrides.task))
+    plain["threads"], device = launch.job_settings(plain, hc)
+    record = runner.run(plain, choices=dict(hc.runtime.choices), overrides=list(hc.overrides.task), device=device)
     with open(os.path.join(hc.runtime.output_dir, KEY_FILE), "w") as fh:
         fh.write(f"{record['experiment']}/{record['key']}\n")
     if hc.mode == RunMode.RUN:

@@ -24,6 +24,7 @@ from ddfbench.models import load_family
 from ddfbench.oracle import Oracle
 from ddfbench.representation import Budget, FitData, Representation
 from ddfbench.shapes import load_shape
+from ddfbench.train import resolve_device, seed_everything
 
 log = logging.getLogger(__name__)
 
@@ -34,17 +35,6 @@ class StageFailed(RuntimeError):
 
 def _now() -> str:
     return _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
-
-
-def resolve_device(name: str) -> str:
-    """"auto" → cuda where available, else cpu; "cuda" without a GPU is an input error."""
-    if name == "auto":
-        return "cuda" if torch.cuda.is_available() else "cpu"
-    if name.startswith("cuda") and not torch.cuda.is_available():
-        raise InputError(f"train.device={name}: no CUDA device is available here (use cpu or auto)")
-    if name != "cpu" and not name.startswith("cuda"):
-        raise InputError(f"train.device={name}: unknown device (cpu | cuda | auto)")
-    return name
 
 
 def _probe_fn(gt_points: np.ndarray, resolution: int, radii: list[float]):
@@ -145,8 +135,12 @@ def _one_line(exc: BaseException) -> str:
 
 
 def run(cfg: Mapping[str, Any], choices: Mapping[str, str] | None = None,
-        overrides: list[str] | None = None) -> dict[str, Any]:
-    """Run one job from a resolved config (plain dict); return its record (also written to disk)."""
+        overrides: list[str] | None = None, device: str | None = None) -> dict[str, Any]:
+    """Run one job from a resolved config (plain dict); return its record (also written to disk).
+
+    choices: Hydra's config-group choices (the record's `model` label); device: the job's device as
+    the launcher gives it (ddfbench.launch.job_device); None means train.device.
+    """
     choices = dict(choices or {})
     experiment = str(cfg.get("experiment_name", "single"))
     key = runs.config_key(cfg)
@@ -170,9 +164,9 @@ def run(cfg: Mapping[str, Any], choices: Mapping[str, str] | None = None,
         "started": _now(), "finished": None,
     }
     try:
-        device = resolve_device(str(cfg.get("train", {}).get("device", "cpu")))
+        device = resolve_device(device or str(cfg.get("train", {}).get("device", "cpu")))
         out["env"] = runs.environment(device, threads)
-        torch.manual_seed(seed)
+        seed_everything(seed)  # a reused worker process starts each run from the same state
         _stages(cfg, rdir, device, seed, out)
         out["status"] = "ok"
     except Exception as exc:  # every failure becomes a record, never a crash mid-sweep

@@ -22,6 +22,7 @@ import numpy as np
 from hydra import compose, initialize_config_dir
 from omegaconf import OmegaConf
 
+from ddfbench import CONF_DIR
 from ddfbench.models import load_family
 from ddfbench.oracle import Oracle
 from ddfbench.render.integrator import render
@@ -30,11 +31,10 @@ from ddfbench.render.timing import clock, compute_threads
 from ddfbench.representation import Budget, FitData, Representation
 from ddfbench.shapes import load_shape
 
-_CONF = os.path.join(os.path.dirname(__file__), "..", "..", "conf")
 
 
 def _config(group: str, name: str) -> dict:
-    with initialize_config_dir(config_dir=os.path.abspath(os.path.join(_CONF, group)), version_base="1.3"):
+    with initialize_config_dir(config_dir=os.path.join(CONF_DIR, group), version_base="1.3"):
         return OmegaConf.to_container(compose(config_name=name), resolve=True)
 
 

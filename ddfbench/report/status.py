@@ -22,10 +22,9 @@ from typing import Any
 
 from omegaconf import DictConfig, OmegaConf, open_dict
 
-from ddfbench import runs
+from ddfbench import CONF_DIR, runs
 from ddfbench.errors import InputError
 
-CONF_DIR = os.path.normpath(os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "conf"))
 LAUNCHER_PREFIXES = ("hydra/launcher", "hydra.launcher")  # cannot change a run; its plugin may be absent here
 
 
