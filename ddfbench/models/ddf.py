@@ -1,0 +1,352 @@
+"""Directed distance field (DDF): an MLP phi(x, theta) -> distance along theta, plus visibility.
+
+A ray (origin o, unit direction d) is answered with one network query at the
+point where it enters the field box [-domain, domain]^3: t = t_entry + phi(x_e, d),
+a hit when the visibility says so and the hit lies inside the box. Normals come
+from one backward pass, n = grad_x phi (paper Eqs. 3 and 7), signed so n.d < 0.
+The mesh is the level set of UDF(x) = min over K directions of phi(x, theta_k),
+taken only over directions whose visibility says hit (paper Eq. 5).
+
+cfg keys (conf/model/ddf.yaml documents each):
+  network   width, depth, activation (relu | softplus), weight_norm, dropout
+  inputs    direction ("vector" unit vector | "angles" polar+azimuth as in the paper),
+            param ("point": x as given | "ray": x split into the foot point of its line
+            and the coordinate s0 = x.d along it; the net then predicts where along the
+            line the hit lies, which is constant along a ray), pos_freqs, dir_freqs
+            (positional-encoding octaves; 0 = raw input)
+  heads     visibility ("head": a logit trained with cross entropy | "clamp": no head,
+            hit where the clamped distance stays below clamp_hit_ratio * delta, as in the paper)
+  loss      loss ("l1" | "clamp" with delta), vis_weight, batch_size, lr, weight_decay,
+            lr_schedule / lr_final_ratio / lr_warmup (ddfbench.train.Schedule), grad_clip
+  mesh      udf_directions (K), udf_rank (1 = the min; r = the r-th smallest, robust to
+            a spurious hit), udf_level_steps (level in grid steps), udf_coarse,
+            udf_lipschitz (narrow band, see ddfbench.extract.banded_grid), udf_project
+            (move shell vertices onto the predicted surface along -normal)
+  storage   storage_dtype (float32 | float16 state dict), eval_batch
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from typing import Any, Mapping
+
+import numpy as np
+import torch
+import trimesh
+from torch import nn
+
+from ddfbench.errors import InputError
+from ddfbench.extract import udf_to_mesh
+from ddfbench.representation import Budget, FitData, FitStats, Hits, Probe, RayStatus, Representation
+from ddfbench.train import Schedule, seed_everything, train_loop
+
+DEFAULTS: dict[str, Any] = {
+    "width": 256, "depth": 4, "activation": "relu", "weight_norm": False, "dropout": 0.0,
+    "direction": "vector", "param": "ray", "pos_freqs": 8, "dir_freqs": 4,
+    "visibility": "head", "loss": "l1", "delta": 1.0, "clamp_hit_ratio": 0.95, "vis_weight": 1.0,
+    "batch_size": 2048, "lr": 2e-3, "weight_decay": 0.0, "lr_schedule": "cosine", "lr_final_ratio": 0.01,
+    "lr_warmup": 0.0, "grad_clip": 1.0,
+    "udf_directions": 16, "udf_rank": 3, "udf_level_steps": 0.75, "udf_coarse": 4, "udf_lipschitz": 1.5, "udf_project": True,
+    "storage_dtype": "float32", "eval_batch": 65536,
+}
+_CHOICES = {"activation": ("relu", "softplus"), "direction": ("vector", "angles"), "param": ("point", "ray"),
+            "visibility": ("head", "clamp"), "loss": ("l1", "clamp"), "storage_dtype": ("float32", "float16")}
+
+
+def fibonacci_directions(k: int) -> np.ndarray:
+    """k nearly uniform unit vectors (k, 3) float32 on the sphere (golden spiral)."""
+    i = np.arange(k) + 0.5
+    z = 1 - 2 * i / k
+    r = np.sqrt(np.maximum(0.0, 1 - z * z))
+    phi = math.pi * (3 - math.sqrt(5)) * i
+    return np.stack([r * np.cos(phi), r * np.sin(phi), z], 1).astype(np.float32)
+
+
+def box_entry(origins: np.ndarray, directions: np.ndarray, half: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Slab test against [-half, half]^3 for rays (N,3),(N,3).
+
+    Returns t_entry (N,) (0 for origins inside), t_exit (N,), and inside (N,) bool: the ray meets the box.
+    """
+    with np.errstate(divide="ignore", invalid="ignore"):
+        inv = 1.0 / directions
+        t0, t1 = (-half - origins) * inv, (half - origins) * inv
+    lo = np.where(np.isnan(t0), -np.inf, np.minimum(t0, t1)).max(1)  # nan: parallel ray on a slab face
+    hi = np.where(np.isnan(t1), np.inf, np.maximum(t0, t1)).min(1)
+    t_entry = np.maximum(lo, 0.0)
+    return t_entry.astype(np.float32), hi.astype(np.float32), hi >= t_entry
+
+
+class PositionalEncoding(nn.Module):
+    """v (N, c) -> [v, sin(2^k pi v), cos(2^k pi v) for k < n_freqs] (N, c (1 + 2 n_freqs))."""
+
+    def __init__(self, n_freqs: int):
+        super().__init__()
+        self.register_buffer("freqs", math.pi * 2.0 ** torch.arange(int(n_freqs)), persistent=False)
+
+    def out_dim(self, c: int) -> int:
+        return c * (1 + 2 * len(self.freqs))
+
+    def forward(self, v: torch.Tensor) -> torch.Tensor:
+        if len(self.freqs) == 0:
+            return v
+        a = (v[..., None] * self.freqs).flatten(-2)
+        return torch.cat([v, torch.sin(a), torch.cos(a)], -1)
+
+
+class DDFNet(nn.Module):
+    """phi(x, d) for x (N,3), unit d (N,3) -> (distance (N,), visibility logit (N,) or None)."""
+
+    def __init__(self, cfg: Mapping[str, Any]):
+        super().__init__()
+        self.param, self.direction = cfg["param"], cfg["direction"]
+        self.pos_pe, self.dir_pe = PositionalEncoding(cfg["pos_freqs"]), PositionalEncoding(cfg["dir_freqs"])
+        n_pos = self.pos_pe.out_dim(4 if self.param == "ray" else 3)
+        n_dir = self.dir_pe.out_dim(3 if self.direction == "vector" else 2)
+        n_out = 2 if cfg["visibility"] == "head" else 1
+        act = {"relu": nn.ReLU, "softplus": lambda: nn.Softplus(beta=100)}[cfg["activation"]]
+        layers, n_in = [], n_pos + n_dir
+        for _ in range(int(cfg["depth"])):
+            lin = nn.Linear(n_in, int(cfg["width"]))
+            layers += [nn.utils.parametrizations.weight_norm(lin) if cfg["weight_norm"] else lin, act()]
+            if cfg["dropout"] > 0:
+                layers.append(nn.Dropout(float(cfg["dropout"])))
+            n_in = int(cfg["width"])
+        self.body = nn.Sequential(*layers)
+        self.out = nn.Linear(n_in, n_out)
+
+    def forward(self, x: torch.Tensor, d: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor | None]:
+        if self.param == "ray":
+            s0 = (x * d).sum(-1, keepdim=True)
+            pos = torch.cat([x - s0 * d, s0], -1)
+        else:
+            pos = x
+        if self.direction == "angles":
+            polar = torch.acos(d[:, 2:3].clamp(-1.0, 1.0))
+            dirs = torch.cat([polar, torch.atan2(d[:, 1:2], d[:, 0:1])], -1)
+        else:
+            dirs = d
+        y = self.out(self.body(torch.cat([self.pos_pe(pos), self.dir_pe(dirs)], -1)))
+        dist = y[:, 0] - s0[:, 0] if self.param == "ray" else y[:, 0]
+        return dist, (y[:, 1] if y.shape[1] > 1 else None)
+
+
+def _resolved(cfg: Mapping[str, Any]) -> dict[str, Any]:
+    out = {**DEFAULTS, **{k: v for k, v in cfg.items() if k != "family"}}
+    for key, allowed in _CHOICES.items():
+        if out[key] not in allowed:
+            raise InputError(f"model.{key} '{out[key]}': unknown (one of {', '.join(allowed)})")
+    for key in ("width", "depth", "batch_size", "udf_directions", "udf_rank", "eval_batch"):
+        if int(out[key]) < 1:
+            raise InputError(f"model.{key} {out[key]}: must be a positive integer")
+    if out["loss"] == "clamp" or out["visibility"] == "clamp":
+        if not float(out["delta"]) > 0:
+            raise InputError(f"model.delta {out['delta']}: must be > 0 for the clamp loss")
+    if out["visibility"] == "clamp" and out["loss"] != "clamp":
+        raise InputError("model.visibility 'clamp' needs model.loss 'clamp' (misses are learned as delta)")
+    return out
+
+
+class DDF(Representation):
+    """The directed distance field family (see the module docstring for cfg)."""
+
+    family = "ddf"
+    sample_kind = "rays"
+
+    def __init__(self, cfg: Mapping[str, Any], domain: float = 0.6):
+        super().__init__(_resolved(cfg), domain)
+        self.device = "cpu"
+        self.net = DDFNet(self.cfg)
+        self.net.eval()
+        self.extract_info: dict[str, Any] | None = None  # the last to_mesh's extraction info
+
+    # ---- queries --------------------------------------------------------------------------------
+    def _forward_np(self, x: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(distance >= 0, hit) for points (N,3), unit directions (N,3), in batches, no grad."""
+        dist, hit = np.empty(len(x), np.float32), np.empty(len(x), bool)
+        bs = int(self.cfg["eval_batch"])
+        with torch.no_grad():
+            for s in range(0, len(x), bs):
+                xs = torch.as_tensor(np.asarray(x[s : s + bs], np.float32), device=self.device)
+                ds = torch.as_tensor(np.asarray(d[s : s + bs], np.float32), device=self.device)
+                t, logit = self.net(xs, ds)
+                dist[s : s + bs] = t.clamp_min(0).cpu().numpy()
+                hit[s : s + bs] = self._hit_from(t, logit).cpu().numpy()
+        return dist, hit
+
+    def _hit_from(self, t: torch.Tensor, logit: torch.Tensor | None) -> torch.Tensor:
+        if logit is not None:
+            return logit > 0
+        return t < float(self.cfg["clamp_hit_ratio"]) * float(self.cfg["delta"])
+
+    def distance(self, points: np.ndarray, directions: np.ndarray) -> np.ndarray:
+        """phi(x, theta): predicted distance (N,) float32 along unit directions (>= 0; meaningful where visible)."""
+        return self._forward_np(points, directions)[0]
+
+    def visibility(self, points: np.ndarray, directions: np.ndarray) -> np.ndarray:
+        """Whether the ray from each point along its direction hits the surface (N,) bool."""
+        return self._forward_np(points, directions)[1]
+
+    def normals(self, points: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Unit normals (N,3) from grad_x phi, signed so n.d < 0, and valid (N,) bool.
+
+        Where the gradient vanishes or is not finite the normal falls back to -d, flagged invalid.
+        """
+        n = np.empty((len(points), 3), np.float32)
+        bs = int(self.cfg["eval_batch"])
+        for s in range(0, len(points), bs):
+            x = torch.as_tensor(np.asarray(points[s : s + bs], np.float32), device=self.device).requires_grad_(True)
+            d = torch.as_tensor(np.asarray(directions[s : s + bs], np.float32), device=self.device)
+            with torch.enable_grad():
+                t, _ = self.net(x, d)
+                (g,) = torch.autograd.grad(t.sum(), x)
+            n[s : s + bs] = g.cpu().numpy()
+        norm = np.linalg.norm(n, axis=1)
+        valid = np.isfinite(norm) & (norm > 1e-6)
+        directions = np.asarray(directions, np.float32)
+        n = np.where(valid[:, None], n / np.where(valid, norm, 1.0)[:, None], -directions)
+        flip = np.einsum("ij,ij->i", n, directions) > 0
+        n[flip] *= -1
+        return n.astype(np.float32), valid
+
+    def intersect(self, origins: np.ndarray, directions: np.ndarray, normals: bool = True) -> Hits:
+        """One network query per ray at its box entry; one backward pass per hit ray when normals=True.
+
+        stats: field_evals (network point evaluations), backward_passes (points differentiated).
+        """
+        o, d = np.asarray(origins, np.float32).reshape(-1, 3), np.asarray(directions, np.float32).reshape(-1, 3)
+        out = Hits.empty(len(o))
+        t_entry, t_exit, meets = box_entry(o, d, self.domain)
+        idx = np.flatnonzero(meets)
+        x = o[idx] + t_entry[idx, None] * d[idx]
+        dist, hit = self._forward_np(x, d[idx])
+        hit &= t_entry[idx] + dist <= t_exit[idx]
+        rows = idx[hit]
+        out.t[rows] = t_entry[rows] + dist[hit]
+        out.hit[rows] = True
+        out.status[rows] = RayStatus.HIT
+        backward = 0
+        if normals and len(rows):
+            out.normal[rows], out.normal_valid[rows] = self.normals(x[hit], d[rows])
+            backward = len(rows)
+        out.stats = {"field_evals": int(len(idx)), "backward_passes": int(backward)}
+        return out
+
+    # ---- mesh -----------------------------------------------------------------------------------
+    def udf(self, points: np.ndarray, directions: np.ndarray, rank: int = 1) -> np.ndarray:
+        """UDF (N,) = min over directions (K,3) of phi where visible (paper Eq. 5); inf where none hits.
+
+        rank > 1 takes the rank-th smallest instead of the min: near a surface many directions
+        see it at about the same distance, so one spurious near-zero prediction is outvoted.
+        """
+        k = len(directions)
+        x = np.repeat(np.asarray(points, np.float32), k, axis=0)
+        d = np.tile(directions, (len(points), 1))
+        dist, hit = self._forward_np(x, d)
+        per_dir = np.where(hit, dist, np.inf).reshape(-1, k)
+        r = min(int(rank), k) - 1
+        return np.partition(per_dir, r, axis=1)[:, r] if r else per_dir.min(1)
+
+    def to_mesh(self, resolution: int) -> trimesh.Trimesh:
+        """Marching cubes of the UDF at udf_level_steps grid steps; shell vertices projected if udf_project."""
+        dirs = fibonacci_directions(int(self.cfg["udf_directions"]))
+        step = 2 * self.domain / (int(resolution) - 1)
+        level = float(self.cfg["udf_level_steps"]) * step
+        mesh, info = udf_to_mesh(
+            lambda p: self.udf(p, dirs, int(self.cfg["udf_rank"])), int(resolution), self.domain, level,
+            batch=max(1, int(self.cfg["eval_batch"]) // len(dirs)),
+            coarse=int(self.cfg["udf_coarse"]), lipschitz=float(self.cfg["udf_lipschitz"]),
+        )
+        if not info["empty"] and self.cfg["udf_project"]:
+            mesh = self._project(mesh, max_move=2 * level + step)
+        self.extract_info = info
+        return mesh
+
+    def _project(self, mesh: trimesh.Trimesh, max_move: float) -> trimesh.Trimesh:
+        """Move each shell vertex along -normal (towards the surface) onto the predicted hit, when close."""
+        v = np.asarray(mesh.vertices, np.float32)
+        towards = -np.asarray(mesh.vertex_normals, np.float32)
+        dist, hit = self._forward_np(v, towards)
+        move = hit & (dist <= max_move)
+        v = v + np.where(move, dist, 0.0)[:, None] * towards
+        return trimesh.Trimesh(v, mesh.faces, process=False)
+
+    # ---- training -------------------------------------------------------------------------------
+    def fit(self, data: FitData, budget: Budget, probe: Probe | None = None) -> FitStats:
+        s = data.samples
+        if s is None or s.d is None or s.t is None or s.hit is None:
+            raise InputError("model ddf: needs ray samples (x, d, t, hit); the sampler gave none")
+        if len(s) == 0:
+            raise InputError("model ddf: the sample set is empty")
+        seed_everything(budget.seed)
+        self.device = budget.device
+        self.net = DDFNet(self.cfg).to(self.device)
+        dev = self.device
+        x = torch.as_tensor(s.x, dtype=torch.float32, device=dev)
+        d = torch.as_tensor(s.d, dtype=torch.float32, device=dev)
+        hit = torch.as_tensor(s.hit, dtype=torch.bool, device=dev)
+        t = torch.where(hit, torch.as_tensor(np.nan_to_num(s.t, posinf=0.0), dtype=torch.float32, device=dev), 0.0)
+        cfg, n = self.cfg, len(s)
+        gen = torch.Generator(device=dev).manual_seed(int(budget.seed))
+        delta = float(cfg["delta"])
+
+        def step_fn(step: int) -> torch.Tensor:
+            i = torch.randint(0, n, (int(cfg["batch_size"]),), device=dev, generator=gen)
+            pred, logit = self.net(x[i], d[i])
+            h = hit[i]
+            if cfg["loss"] == "clamp":  # |clamp(y, delta) - clamp(y_hat, delta)|, misses labelled delta
+                target = torch.where(h, t[i].clamp(max=delta), delta)
+                dist_loss = (pred.clamp(max=delta) - target).abs()
+                dist_loss = dist_loss.mean() if logit is None else dist_loss[h].sum() / h.sum().clamp_min(1)
+            else:
+                dist_loss = (pred - t[i]).abs()[h].sum() / h.sum().clamp_min(1)
+            if logit is None:
+                return dist_loss
+            vis = nn.functional.binary_cross_entropy_with_logits(logit, h.float())
+            return dist_loss + float(cfg["vis_weight"]) * vis
+
+        optimizer = torch.optim.Adam(self.net.parameters(), lr=float(cfg["lr"]), weight_decay=float(cfg["weight_decay"]))
+        stats = train_loop(
+            self.net, optimizer, step_fn, budget, Schedule.from_cfg(cfg),
+            probe_fn=(lambda: probe(self)) if probe is not None else None,
+            grad_clip=float(cfg["grad_clip"]) or None, desc="ddf",
+        )
+        stats.extra.update(n_samples=n, hit_share=float(s.hit.mean()), n_params=self.n_params())
+        return stats
+
+    # ---- artifact -------------------------------------------------------------------------------
+    def n_params(self) -> int:
+        return int(sum(p.numel() for p in self.net.parameters()))
+
+    def save(self, path: str) -> str:
+        """A folder: weights.pt (state dict, storage_dtype) and config.json. Returns the folder."""
+        path = path[:-3] if path.endswith(".pt") else path
+        os.makedirs(path, exist_ok=True)
+        dtype = torch.float16 if self.cfg["storage_dtype"] == "float16" else torch.float32
+        state = {k: v.detach().to("cpu", dtype) for k, v in self.net.state_dict().items()}
+        torch.save(state, os.path.join(path, "weights.pt"))
+        with open(os.path.join(path, "config.json"), "w") as f:
+            json.dump({"family": self.family, "domain": self.domain, "cfg": self.cfg}, f, indent=1, sort_keys=True)
+        self._saved_path = path
+        return path
+
+    @classmethod
+    def load(cls, path: str, domain: float = 0.6) -> "DDF":
+        path = path[:-3] if path.endswith(".pt") else path
+        try:
+            with open(os.path.join(path, "config.json")) as f:
+                meta = json.load(f)
+            state = torch.load(os.path.join(path, "weights.pt"), map_location="cpu", weights_only=True)
+        except (OSError, ValueError, RuntimeError) as err:
+            raise InputError(f"ddf artifact '{path}': cannot be read ({err})") from err
+        if meta.get("family") != cls.family:
+            raise InputError(f"ddf artifact '{path}': holds family '{meta.get('family')}', not ddf")
+        rep = cls(meta["cfg"], float(meta.get("domain", domain)))
+        rep.net.load_state_dict({k: v.float() for k, v in state.items()})
+        rep.net.eval()
+        rep._saved_path = path
+        return rep
+
+
+FAMILY = DDF

@@ -1,0 +1,219 @@
+"""The DDF family on a sphere: fit, rays, normals, mesh, artifacts, the paper preset and the NaN guard."""
+
+import os
+
+import numpy as np
+import pytest
+import torch
+import trimesh
+from omegaconf import OmegaConf
+
+from ddfbench.errors import InputError
+from ddfbench.models import load_family
+from ddfbench.models.ddf import DDF, box_entry, fibonacci_directions
+from ddfbench.oracle import Oracle
+from ddfbench.representation import Budget, FitData, RayStatus
+from ddfbench.samples import Samples
+
+R0 = 0.4
+CONF = os.path.join(os.path.dirname(__file__), "..", "conf", "model")
+SMALL = {"width": 128, "depth": 3, "pos_freqs": 4, "dir_freqs": 2, "batch_size": 2048, "lr": 3e-3, "vis_weight": 0.1,
+         "udf_directions": 16, "eval_batch": 16384}
+
+
+def unit(v):
+    return v / np.linalg.norm(v, axis=1, keepdims=True)
+
+
+def ray_samples(oracle, n, seed):
+    """Half random points in the box, half points marched off the surface looking back at it; exact t."""
+    rng = np.random.default_rng(seed)
+    x = rng.uniform(-0.6, 0.6, (n, 3))
+    d = unit(rng.normal(size=(n, 3)))
+    m = n // 2
+    p = oracle.closest_point(rng.uniform(-0.6, 0.6, (m, 3)))[0]
+    out = unit(rng.normal(size=(m, 3)))
+    out[np.einsum("ij,ij->i", out, p) < 0] *= -1
+    x[:m], d[:m] = p + rng.uniform(0, 0.3, (m, 1)) * out, -out
+    t = oracle.first_hit(x, d)[0]
+    return Samples(x=x.astype(np.float32), d=d.astype(np.float32), t=t, hit=np.isfinite(t))
+
+
+def analytic_hit(o, d):
+    """First hit of rays with the sphere |x| = R0 (inf on a miss), brute force quadratic."""
+    b = np.einsum("ij,ij->i", o, d)
+    disc = b * b - (np.einsum("ij,ij->i", o, o) - R0**2)
+    sq = np.sqrt(np.maximum(disc, 0))
+    t = np.where(-b - sq > 0, -b - sq, -b + sq)
+    return np.where((disc > 0) & (t > 0), t, np.inf)
+
+
+@pytest.fixture(scope="module")
+def sphere_oracle():
+    mesh = trimesh.creation.icosphere(subdivisions=4, radius=R0)
+    return mesh, Oracle(mesh)
+
+
+@pytest.fixture(scope="module")
+def fitted(sphere_oracle):
+    mesh, oracle = sphere_oracle
+    rep = DDF(SMALL)
+    stats = rep.fit(FitData(ray_samples(oracle, 200_000, 0), mesh, oracle),
+                    Budget(max_steps=700, max_seconds=120, seed=0, n_probes=0))
+    return rep, stats
+
+
+def camera_rays(n, seed):
+    rng = np.random.default_rng(seed)
+    o = unit(rng.normal(size=(n, 3))) * 1.5
+    target = rng.uniform(-0.5, 0.5, (n, 3))
+    return o.astype(np.float32), unit(target - o).astype(np.float32)
+
+
+def test_fit_reaches_small_error_on_a_sphere(fitted):
+    rep, stats = fitted
+    assert stats.status == "ok" and stats.steps == 700
+    o, d = camera_rays(20000, 1)
+    truth = analytic_hit(o, d)
+    hits = rep.intersect(o, d, normals=False)
+    assert (hits.hit == np.isfinite(truth)).mean() > 0.97
+    both = hits.hit & np.isfinite(truth)
+    assert np.median(np.abs(hits.t[both] - truth[both])) < 0.005
+    assert set(np.unique(hits.status)) <= {RayStatus.HIT, RayStatus.MISS}
+    assert np.isinf(hits.t[~hits.hit]).all()
+
+
+def test_mesh_of_the_udf_lies_on_the_sphere(fitted):
+    rep, _ = fitted
+    mesh = rep.to_mesh(40)
+    assert len(mesh.faces) > 100
+    r = np.linalg.norm(mesh.vertices, axis=1)
+    assert np.median(np.abs(r - R0)) < 0.01
+    assert np.percentile(np.abs(r - R0), 95) < 0.03
+
+
+def test_normals_are_unit_finite_and_match_the_mesh(fitted, sphere_oracle):
+    rep, _ = fitted
+    _, oracle = sphere_oracle
+    o, d = camera_rays(5000, 2)
+    hits = rep.intersect(o, d, normals=True)
+    n = hits.normal[hits.hit]
+    assert np.isfinite(n).all() and np.allclose(np.linalg.norm(n, axis=1), 1, atol=1e-5)
+    assert (np.einsum("ij,ij->i", n, d[hits.hit]) < 0).all()
+    _, tri, gt_normal = oracle.first_hit(o, d)
+    both = hits.hit & (tri >= 0)
+    cos = np.einsum("ij,ij->i", hits.normal[both], gt_normal[both])
+    assert np.median(np.degrees(np.arccos(np.clip(cos, -1, 1)))) < 8
+    assert hits.stats["field_evals"] == 5000 and hits.stats["backward_passes"] == int(hits.hit.sum())
+    assert rep.intersect(o, d, normals=False).stats["backward_passes"] == 0
+
+
+def test_normals_where_the_gradient_vanishes_are_flagged():
+    rep = DDF({**SMALL, "width": 8, "depth": 1, "param": "point"})  # "ray" adds -x.d: never flat
+    for p in rep.net.parameters():
+        torch.nn.init.zeros_(p)  # constant field: zero gradient everywhere
+    d = unit(np.random.default_rng(0).normal(size=(10, 3))).astype(np.float32)
+    n, valid = rep.normals(np.zeros((10, 3), np.float32), d)
+    assert not valid.any() and np.allclose(n, -d)
+
+
+def test_udf_takes_the_min_over_visible_directions(fitted):
+    rep, _ = fitted
+    dirs = fibonacci_directions(64)
+    assert np.allclose(np.linalg.norm(dirs, axis=1), 1, atol=1e-6) and np.abs(dirs.mean(0)).max() < 0.02
+    x = np.array([[0.0, 0.0, 0.5], [0.0, 0.3, 0.0], [0.25, 0.25, 0.25]], np.float32)
+    udf = rep.udf(x, dirs)
+    exact = np.abs(np.linalg.norm(x, axis=1) - R0)
+    assert np.allclose(udf, exact, atol=0.02)
+    far = rep.udf(np.array([[0.0, 0.0, 0.59]], np.float32), np.array([[0.0, 0.0, 1.0]], np.float32))
+    assert np.isinf(far).all()  # looking away from the sphere: no visible direction
+
+
+def test_box_entry_against_brute_force_marching():
+    rng = np.random.default_rng(0)
+    o = rng.uniform(-2, 2, (500, 3)).astype(np.float32)
+    d = unit(rng.normal(size=(500, 3))).astype(np.float32)
+    d[:5] = [1, 0, 0]  # axis-parallel rays hit the slab-parallel case
+    t_in, t_out, meets = box_entry(o, d, 0.6)
+    ts = np.linspace(0, 5, 5001)
+    inside = np.all(np.abs(o[:, None, :] + ts[None, :, None] * d[:, None, :]) <= 0.6, axis=2)
+    clear = ~meets | (t_out - t_in > 2e-3)  # chords shorter than the marching step may slip through
+    assert np.array_equal(meets[clear], inside.any(1)[clear])
+    first = np.where(inside.any(1), ts[inside.argmax(1)], np.nan)
+    assert np.allclose(t_in[inside.any(1)], first[inside.any(1)], atol=2e-3)
+
+
+def test_rays_missing_the_box_are_misses_without_evaluations(fitted):
+    rep, _ = fitted
+    o = np.array([[2.0, 2.0, 2.0], [0.0, 0.0, 1.5]], np.float32)
+    d = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0]], np.float32)
+    hits = rep.intersect(o, d)
+    assert list(hits.hit) == [False, True] and hits.stats["field_evals"] == 1
+    assert abs(hits.t[1] - (1.5 - R0)) < 0.01
+
+
+def test_save_load_round_trip_and_storage(fitted, tmp_path):
+    rep, _ = fitted
+    o, d = camera_rays(3000, 3)
+    folder = rep.save(str(tmp_path / "model"))
+    files = [os.path.join(folder, f) for f in os.listdir(folder)]
+    assert rep.storage_bytes() == sum(os.path.getsize(f) for f in files)
+    back = load_family("ddf").load(folder)
+    a, b = rep.intersect(o, d), back.intersect(o, d)
+    assert np.array_equal(a.t, b.t) and np.array_equal(a.normal, b.normal)
+    assert back.n_params() == rep.n_params()
+
+    half = DDF({**rep.cfg, "storage_dtype": "float16"})
+    half.net.load_state_dict(rep.net.state_dict())
+    half.save(str(tmp_path / "half"))
+    assert half.storage_bytes() < 0.6 * rep.storage_bytes()
+    c = DDF.load(str(tmp_path / "half")).intersect(o, d, normals=False)
+    both = c.hit & a.hit
+    assert (c.hit == a.hit).mean() > 0.99 and np.abs(c.t[both] - a.t[both]).max() < 0.01
+
+
+def test_load_rejects_foreign_and_broken_artifacts(tmp_path):
+    with pytest.raises(InputError):
+        DDF.load(str(tmp_path / "missing"))
+    (tmp_path / "bad").mkdir()
+    (tmp_path / "bad" / "config.json").write_text('{"family": "mesh", "cfg": {}}')
+    torch.save({}, tmp_path / "bad" / "weights.pt")
+    with pytest.raises(InputError):
+        DDF.load(str(tmp_path / "bad"))
+
+
+def test_paper_preset_builds_and_trains_a_few_steps(sphere_oracle):
+    mesh, oracle = sphere_oracle
+    cfg = OmegaConf.to_container(OmegaConf.load(os.path.join(CONF, "ddf_paper.yaml")))
+    rep = DDF({**cfg, "batch_size": 256})
+    wn = [m for m in rep.net.modules() if isinstance(m, torch.nn.Linear) and hasattr(m, "parametrizations")]
+    drop = [m for m in rep.net.modules() if isinstance(m, torch.nn.Dropout)]
+    assert len(wn) == 8 and len(drop) == 8 and all(m.out_features == 512 for m in wn)
+    stats = rep.fit(FitData(ray_samples(oracle, 5000, 1), mesh, oracle), Budget(max_steps=3, max_seconds=60))
+    assert stats.status == "ok" and stats.steps == 3
+    hits = rep.intersect(*camera_rays(100, 4))
+    assert np.isfinite(hits.normal).all()
+
+
+def test_default_preset_matches_the_code_defaults():
+    cfg = OmegaConf.to_container(OmegaConf.load(os.path.join(CONF, "ddf.yaml")))
+    assert DDF(cfg).cfg == DDF({}).cfg
+
+
+def test_nan_guard_fires_on_forced_divergence(sphere_oracle):
+    mesh, oracle = sphere_oracle
+    rep = DDF({**SMALL, "lr": 1e30, "grad_clip": 0, "lr_schedule": "constant"})
+    stats = rep.fit(FitData(ray_samples(oracle, 5000, 2), mesh, oracle), Budget(max_steps=500, max_seconds=60))
+    assert stats.status == "failed" and "non-finite" in stats.message and stats.steps < 500
+
+
+def test_bad_config_and_samples_raise_input_errors(sphere_oracle):
+    mesh, oracle = sphere_oracle
+    with pytest.raises(InputError):
+        DDF({"param": "polar"})
+    with pytest.raises(InputError):
+        DDF({"width": 0})
+    with pytest.raises(InputError):
+        DDF({"visibility": "clamp", "loss": "l1"})
+    with pytest.raises(InputError):
+        DDF(SMALL).fit(FitData(Samples(x=np.zeros((4, 3), np.float32)), mesh, oracle), Budget(max_steps=1))
