@@ -1,0 +1,116 @@
+"""Shared bases of the SDF-like families: rays by sphere tracing (ddfbench.trace), mesh by marching cubes.
+
+SDFFamily: a subclass provides `field(points (M, 3) torch float32 on self.device) -> (M,)`
+signed distance and `surface_normals`; sdf on numpy points, intersect and to_mesh are here.
+NetSDFFamily: a field that is one torch module `self.net` (normals by autograd; artifact =
+one torch file {"header": JSON config, "state_dict"}, read with weights_only=True).
+The model config's optional `trace` mapping sets TraceOptions.
+"""
+
+from __future__ import annotations
+
+import abc
+import json
+import os
+import pickle
+from typing import Any, Mapping
+
+import numpy as np
+import torch
+import trimesh
+
+from ddfbench import extract
+from ddfbench.errors import InputError
+from ddfbench.representation import Hits, Representation
+from ddfbench.trace import TraceOptions, autograd_normals, sphere_trace, to_hits
+
+_BATCH = 65536  # points per field call when evaluating numpy arrays
+
+
+class SDFFamily(Representation):
+    """Representation answering rays by sphere tracing its signed-distance field."""
+
+    def __init__(self, cfg: Mapping[str, Any], domain: float = 0.6):
+        super().__init__(cfg, domain)
+        self.trace_options = TraceOptions.from_cfg(self.cfg)
+        self.device = "cpu"
+        self.last_mesh_info: dict[str, Any] = {}
+
+    @abc.abstractmethod
+    def field(self, points: torch.Tensor) -> torch.Tensor:
+        """Signed distance (M,) at points (M, 3) float32 on self.device (negative inside)."""
+
+    @abc.abstractmethod
+    def surface_normals(self, points: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, int, int]:
+        """Outward unit normals at surface points (M, 3) -> (normals (M, 3), valid (M,), field_evals, backward_passes)."""
+
+    def sdf(self, points: np.ndarray) -> np.ndarray:
+        """Signed distance (N,) float32 at numpy points (N, 3), in batches."""
+        p = np.asarray(points, np.float32).reshape(-1, 3)
+        out = np.empty(len(p), np.float32)
+        with torch.no_grad():
+            for s in range(0, len(p), _BATCH):
+                x = torch.from_numpy(p[s : s + _BATCH]).to(self.device)
+                out[s : s + _BATCH] = self.field(x).reshape(-1).float().cpu().numpy()
+        return out
+
+    def _batched_field(self, points: torch.Tensor) -> torch.Tensor:
+        return torch.cat([self.field(points[s : s + _BATCH]).reshape(-1) for s in range(0, len(points), _BATCH)]) \
+            if len(points) else points.new_zeros(0)
+
+    def intersect(self, origins: np.ndarray, directions: np.ndarray, normals: bool = True) -> Hits:
+        result = sphere_trace(self._batched_field, origins, directions, self.domain, self.trace_options, self.device)
+        if not normals or not result.hit.any():
+            return to_hits(result, directions)
+        o = np.asarray(origins, np.float32).reshape(-1, 3)[result.hit]
+        d = np.asarray(directions, np.float32).reshape(-1, 3)[result.hit]
+        points = torch.from_numpy(o + result.t[result.hit, None] * d).to(self.device)
+        nrm, valid, evals, backward = self.surface_normals(points)
+        return to_hits(result, directions, nrm.detach().cpu().numpy(), valid.cpu().numpy(), evals, backward)
+
+    def to_mesh(self, resolution: int) -> trimesh.Trimesh:
+        """Marching cubes of the field on a resolution^3 grid over the domain box (empty mesh flagged in last_mesh_info)."""
+        mesh, self.last_mesh_info = extract.sdf_to_mesh(self.sdf, int(resolution), self.domain)
+        return mesh
+
+
+class NetSDFFamily(SDFFamily):
+    """An SDF family whose field is the torch module `self.net` (built by the subclass's __init__ from cfg)."""
+
+    net: torch.nn.Module
+
+    def field(self, points: torch.Tensor) -> torch.Tensor:
+        return self.net(points)
+
+    def surface_normals(self, points: torch.Tensor):
+        """Autograd normals: one batched backward pass; counts one evaluation and one backward per point."""
+        nrm, valid = autograd_normals(self.net, points)
+        m = int(points.shape[0])
+        return nrm, valid, m, m
+
+    def n_params(self) -> int:
+        return int(sum(p.numel() for p in self.net.parameters()))
+
+    def save(self, path: str) -> str:
+        if not path.endswith(".pt"):
+            path = f"{path}.pt"
+        header = {"family": self.family, "domain": self.domain, "cfg": self.cfg}
+        state = {k: v.detach().cpu() for k, v in self.net.state_dict().items()}
+        tmp = f"{path}.tmp{os.getpid()}"
+        torch.save({"header": json.dumps(header), "state_dict": state}, tmp)
+        os.replace(tmp, path)
+        self._saved_path = path
+        return path
+
+    @classmethod
+    def load(cls, path: str, domain: float = 0.6) -> "NetSDFFamily":
+        try:
+            blob = torch.load(path, map_location="cpu", weights_only=True)
+            header = json.loads(blob["header"])
+            rep = cls(header["cfg"], float(header["domain"]))
+            rep.net.load_state_dict(blob["state_dict"])
+        except (OSError, RuntimeError, KeyError, ValueError, TypeError, pickle.UnpicklingError) as exc:
+            raise InputError(f"{cls.family} artifact {path}: unreadable ({str(exc).splitlines()[0]})") from None
+        rep.net.eval()
+        rep._saved_path = path
+        return rep

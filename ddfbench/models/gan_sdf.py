@@ -1,0 +1,144 @@
+"""GAN-SDF (Zeng 2018 thesis): a generator G(x) -> signed distance trained against a discriminator.
+
+G: Linear(3->256) -> Conv1d(1,16,7) -> MaxPool1d(3,1) -> Tanh -> Conv1d(16,32,5) -> MaxPool1d(3,1)
+   -> ReLU -> Linear(7744->1). D: the same on (x, y, z, sdf) with LeakyReLU(0.2) in place of Tanh
+   and ReLU, and a sigmoid output (applied inside the logistic loss here).
+
+Generator loss (thesis Eq. 4.2), P = G(x), L = the sample's signed distance:
+  w_mse * mean (P - L)^2 + w_near * near-surface term + w_adv * BCE(D(x, P), real)
+near-surface term, `near_term`:
+  "exp"     mean (e^{-P^2/0.1} - e^{-L^2/0.1})^2   (the reading kept by default: the exponent's
+            sign survives in the text, the e does not)
+  "literal" mean ((L^2 - P^2)/0.1)^2               (the text as printed, without the e)
+Discriminator loss: BCE(D(x, L), real) + BCE(D(x, P), fake).
+Options that make it train reliably, all off in the thesis configuration:
+  w_anchor       * mean |clamp(P, -0.1, 0.1) - clamp(L, -0.1, 0.1)|  (an L1 anchor, DeepSDF clamp)
+  spectral_norm  spectral normalization of every D layer
+  w_gp           R1 gradient penalty w_gp/2 * mean ||grad_(x,L) D(x, L)||^2 on real samples
+Only G is the artifact (what a user ships): {"header": JSON config, "state_dict"}, weights_only.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Mapping
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+from ddfbench.errors import InputError
+from ddfbench.models._sdf_family import NetSDFFamily
+from ddfbench.models.neural_sdf import clamped_l1
+from ddfbench.representation import Budget, FitData, FitStats, Probe
+from ddfbench.train import Schedule, seed_everything, train_loop
+
+
+class ConvField(nn.Module):
+    """The thesis' network: in_dim -> Linear 256 -> two Conv1d/MaxPool stages -> Linear(7744 -> 1) -> (M,)."""
+
+    def __init__(self, in_dim: int, first_act: nn.Module, second_act: nn.Module):
+        super().__init__()
+        self.lift = nn.Linear(in_dim, 256)
+        self.conv1, self.conv2 = nn.Conv1d(1, 16, 7), nn.Conv1d(16, 32, 5)
+        self.pool = nn.MaxPool1d(3, stride=1)
+        self.act1, self.act2 = first_act, second_act
+        self.head = nn.Linear(32 * 242, 1)  # 256 -7+1 -3+1 = 248; 248 -5+1 -3+1 = 242
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        h = self.lift(x)[:, None, :]
+        h = self.act1(self.pool(self.conv1(h)))
+        h = self.act2(self.pool(self.conv2(h)))
+        return self.head(h.flatten(1)).squeeze(1)
+
+
+def generator() -> ConvField:
+    return ConvField(3, nn.Tanh(), nn.ReLU())
+
+
+def discriminator(spectral: bool) -> ConvField:
+    """D on (x, y, z, sdf); returns logits (the sigmoid lives in the logistic loss)."""
+    d = ConvField(4, nn.LeakyReLU(0.2), nn.LeakyReLU(0.2))
+    if spectral:
+        for name in ("lift", "conv1", "conv2", "head"):
+            setattr(d, name, nn.utils.parametrizations.spectral_norm(getattr(d, name)))
+    return d
+
+
+def near_surface_term(pred: torch.Tensor, target: torch.Tensor, reading: str) -> torch.Tensor:
+    """The thesis' near-surface term under one of its two readings (see module docstring)."""
+    if reading == "exp":
+        return (torch.exp(-pred**2 / 0.1) - torch.exp(-target**2 / 0.1)).pow(2).mean()
+    if reading == "literal":
+        return ((target**2 - pred**2) / 0.1).pow(2).mean()
+    raise InputError(f"model.near_term '{reading}': unknown (exp | literal)")
+
+
+class GanSDF(NetSDFFamily):
+    """cfg: w_mse, w_near, near_term, w_adv, w_anchor, spectral_norm, w_gp, lr, lr_d, betas, batch,
+    grad_clip, lr_schedule/lr_final_ratio/lr_warmup, trace."""
+
+    family = "gan_sdf"
+    sample_kind = "sdf"
+
+    def __init__(self, cfg: Mapping[str, Any], domain: float = 0.6):
+        super().__init__(cfg, domain)
+        near_surface_term(torch.zeros(1), torch.zeros(1), str(self.cfg.get("near_term", "exp")))  # validates
+        self.net = generator().eval()
+
+
+    def fit(self, data: FitData, budget: Budget, probe: Probe | None = None) -> FitStats:
+        samples = data.samples
+        if samples is None or samples.sdf is None:
+            raise InputError("gan_sdf: fit needs SDF samples (x, sdf); the sampler gave none")
+        cfg = self.cfg
+        seed_everything(budget.seed)
+        self.device = budget.device
+        g = self.net = generator().to(self.device)
+        d = discriminator(bool(cfg.get("spectral_norm", False))).to(self.device)
+        both = nn.ModuleDict({"G": g, "D": d})  # the NaN guard watches both networks
+        x = torch.from_numpy(np.asarray(samples.x, np.float32)).to(self.device)
+        s = torch.from_numpy(np.asarray(samples.sdf, np.float32)).to(self.device)
+        batch = min(int(cfg.get("batch", 1024)), len(x))
+        w_mse, w_near, w_adv, w_anchor, w_gp = (float(cfg.get(k, v)) for k, v in (
+            ("w_mse", 1.0), ("w_near", 2.0), ("w_adv", 5.0), ("w_anchor", 0.0), ("w_gp", 0.0)))
+        reading = str(cfg.get("near_term", "exp"))
+        betas = tuple(float(b) for b in cfg.get("betas", (0.5, 0.999)))
+        opt_g = torch.optim.Adam(g.parameters(), lr=float(cfg.get("lr", 1e-4)), betas=betas)
+        opt_d = torch.optim.Adam(d.parameters(), lr=float(cfg.get("lr_d", 1e-4)), betas=betas)
+
+        def step_fn(step: int) -> torch.Tensor:
+            idx = torch.randint(0, len(x), (batch,), device=self.device)
+            xb, sb = x[idx], s[idx]
+            pred = g(xb)
+            # discriminator step (its own optimizer); a non-finite D loss is returned to trip the guard
+            opt_d.zero_grad(set_to_none=True)
+            real_in = torch.cat([xb, sb[:, None]], 1).requires_grad_(w_gp > 0)
+            real = d(real_in)
+            fake = d(torch.cat([xb, pred.detach()[:, None]], 1))
+            d_loss = F.binary_cross_entropy_with_logits(real, torch.ones_like(real)) + \
+                F.binary_cross_entropy_with_logits(fake, torch.zeros_like(fake))
+            if w_gp > 0:
+                (grad,) = torch.autograd.grad(real.sum(), real_in, create_graph=True)
+                d_loss = d_loss + 0.5 * w_gp * grad.pow(2).sum(1).mean()
+            if not bool(torch.isfinite(d_loss)):
+                return d_loss
+            d_loss.backward()
+            opt_d.step()
+            # generator loss (the shared loop runs its backward and step)
+            judged = d(torch.cat([xb, pred[:, None]], 1))
+            loss = w_mse * F.mse_loss(pred, sb) + w_near * near_surface_term(pred, sb, reading) + \
+                w_adv * F.binary_cross_entropy_with_logits(judged, torch.ones_like(judged))
+            if w_anchor:
+                loss = loss + w_anchor * clamped_l1(pred, sb, 0.1)
+            return loss
+
+        grad_clip = cfg.get("grad_clip")
+        stats = train_loop(both, opt_g, step_fn, budget, Schedule.from_cfg(cfg),
+                           (lambda: probe(self)) if probe is not None else None,
+                           grad_clip=float(grad_clip) if grad_clip else None, desc="gan_sdf")
+        stats.extra["n_params"] = self.n_params()
+        return stats
+
+
+FAMILY = GanSDF

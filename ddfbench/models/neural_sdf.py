@@ -1,0 +1,154 @@
+"""Neural SDF: harmonic embedding -> MLP -> signed distance, answered by sphere tracing.
+
+Network: x (3) -> [x, sin(2^k w0 x), cos(2^k w0 x)] for k < n_harmonics (3 + 6*n_harmonics
+features) -> `depth` Linear+activation layers of `width` -> Linear -> 1. Activation
+softplus (softplus_beta, 100 by default) or relu. Geometric initialization (Atzmon & Lipman
+2020) starts the field near the SDF of a sphere of radius `init_radius` (exactly so only in
+the wide-network limit with relu; at width 128 and in our half-unit box, softplus 100 gives
+a slope of about 0.5-1 and an offset of a few hundredths); the first layer's weights on the
+sin/cos features start at zero so the embedding does not break that.
+
+Losses on a batch of SDF samples (x, s) (sample_kind "sdf"):
+  w_sdf      * mean |clamp(f(x), -delta, delta) - clamp(s, -delta, delta)|   (DeepSDF, delta 0.1)
+  w_surface  * mean |f(x)| over the batch's samples with |s| <= surface_tol
+  w_eikonal  * mean | ||grad f(y)|| - 1 |, y = the batch points and as many uniform box points
+Normals of hits: autograd, one batched backward pass (counted per point).
+Artifact: one torch file {"header": JSON config, "state_dict": ...}, read with weights_only=True.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any, Mapping
+
+import numpy as np
+import torch
+from torch import nn
+
+from ddfbench.errors import InputError
+from ddfbench.models._sdf_family import NetSDFFamily
+from ddfbench.representation import Budget, FitData, FitStats, Probe
+from ddfbench.train import Schedule, seed_everything, train_loop
+
+_ARCH_KEYS = ("n_harmonics", "omega0", "width", "depth", "activation", "softplus_beta")
+
+
+class HarmonicEmbedding(nn.Module):
+    """(M, 3) -> (M, 3 + 6 n): the input, then sin and cos at frequencies w0 * 2^k, k < n."""
+
+    def __init__(self, n_harmonics: int, omega0: float):
+        super().__init__()
+        self.register_buffer("freqs", omega0 * 2.0 ** torch.arange(n_harmonics, dtype=torch.float32), persistent=False)
+
+    @property
+    def out_dim(self) -> int:
+        return 3 + 6 * int(self.freqs.numel())
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        xf = (x[:, :, None] * self.freqs).reshape(x.shape[0], 3 * self.freqs.numel())
+        return torch.cat([x, xf.sin(), xf.cos()], dim=1)
+
+
+class SDFNet(nn.Module):
+    """Harmonic embedding -> depth x (Linear, activation) of width -> Linear -> (M,)."""
+
+    def __init__(self, n_harmonics: int = 6, omega0: float = 1.0, width: int = 128, depth: int = 6,
+                 activation: str = "softplus", softplus_beta: float = 100.0):
+        super().__init__()
+        if activation not in ("softplus", "relu"):
+            raise InputError(f"model.activation '{activation}': unknown (softplus | relu)")
+        if width < 1 or depth < 1 or n_harmonics < 0:
+            raise InputError(f"model width={width} depth={depth} n_harmonics={n_harmonics}: width, depth >= 1, n_harmonics >= 0")
+        self.embed = HarmonicEmbedding(n_harmonics, omega0)
+        dims = [self.embed.out_dim] + [width] * depth
+        self.hidden = nn.ModuleList(nn.Linear(a, b) for a, b in zip(dims[:-1], dims[1:]))
+        self.out = nn.Linear(width, 1)
+        self.act = nn.Softplus(beta=softplus_beta) if activation == "softplus" else nn.ReLU()
+
+    def geometric_init(self, radius: float) -> None:
+        """Start near the SDF of a sphere of `radius` (SAL); embedding sin/cos weights start at zero."""
+        with torch.no_grad():
+            for layer in self.hidden:
+                nn.init.normal_(layer.weight, 0.0, math.sqrt(2.0 / layer.out_features))
+                nn.init.zeros_(layer.bias)
+            self.hidden[0].weight[:, 3:] = 0.0
+            nn.init.normal_(self.out.weight, math.sqrt(math.pi / self.out.in_features), 1e-4)
+            self.out.bias.fill_(-radius)
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        h = self.embed(x)
+        for layer in self.hidden:
+            h = self.act(layer(h))
+        return self.out(h).squeeze(1)
+
+
+def eikonal_residual(net: nn.Module, points: torch.Tensor) -> torch.Tensor:
+    """mean | ||grad f|| - 1 | at points (M, 3), differentiable (create_graph)."""
+    p = points.detach().requires_grad_(True)
+    (grad,) = torch.autograd.grad(net(p).sum(), p, create_graph=True)
+    return (grad.norm(dim=1) - 1.0).abs().mean()
+
+
+def clamped_l1(pred: torch.Tensor, target: torch.Tensor, delta: float) -> torch.Tensor:
+    """DeepSDF loss: mean |clamp(pred, -delta, delta) - clamp(target, -delta, delta)|."""
+    return (pred.clamp(-delta, delta) - target.clamp(-delta, delta)).abs().mean()
+
+
+class NeuralSDF(NetSDFFamily):
+    """cfg: architecture (_ARCH_KEYS), geometric_init, init_radius, lr, batch, delta, w_sdf, w_surface,
+    surface_tol, w_eikonal, grad_clip, lr_schedule/lr_final_ratio/lr_warmup (train.Schedule), trace."""
+
+    family = "neural_sdf"
+    sample_kind = "sdf"
+
+    def __init__(self, cfg: Mapping[str, Any], domain: float = 0.6):
+        super().__init__(cfg, domain)
+        self.net = self._new_net()
+
+    def _new_net(self) -> SDFNet:
+        net = SDFNet(**{k: self.cfg[k] for k in _ARCH_KEYS if k in self.cfg})
+        if bool(self.cfg.get("geometric_init", True)):
+            net.geometric_init(float(self.cfg.get("init_radius", 0.3)))
+        return net.eval()
+
+    def fit(self, data: FitData, budget: Budget, probe: Probe | None = None) -> FitStats:
+        samples = data.samples
+        if samples is None or samples.sdf is None:
+            raise InputError("neural_sdf: fit needs SDF samples (x, sdf); the sampler gave none")
+        seed_everything(budget.seed)
+        self.device = budget.device
+        self.net = net = self._new_net().to(self.device)
+        x = torch.from_numpy(np.asarray(samples.x, np.float32)).to(self.device)
+        s = torch.from_numpy(np.asarray(samples.sdf, np.float32)).to(self.device)
+        batch = min(int(self.cfg.get("batch", 8192)), len(x))
+        delta = float(self.cfg.get("delta", 0.1))
+        w_sdf, w_surf, w_eik = (float(self.cfg.get(k, v)) for k, v in
+                                (("w_sdf", 1.0), ("w_surface", 0.0), ("w_eikonal", 0.0)))
+        surface_tol = float(self.cfg.get("surface_tol", 1e-4))
+
+        def step_fn(step: int) -> torch.Tensor:
+            idx = torch.randint(0, len(x), (batch,), device=self.device)
+            xb, sb = x[idx], s[idx]
+            loss = x.new_zeros(())
+            if w_sdf or w_surf:
+                pred = net(xb)
+                if w_sdf:
+                    loss = loss + w_sdf * clamped_l1(pred, sb, delta)
+                on_surface = sb.abs() <= surface_tol
+                if w_surf and bool(on_surface.any()):
+                    loss = loss + w_surf * pred[on_surface].abs().mean()
+            if w_eik:
+                uniform = (torch.rand_like(xb) * 2 - 1) * self.domain
+                loss = loss + w_eik * eikonal_residual(net, torch.cat([xb, uniform]))
+            return loss
+
+        optimizer = torch.optim.Adam(net.parameters(), lr=float(self.cfg.get("lr", 1e-3)))
+        grad_clip = self.cfg.get("grad_clip")
+        stats = train_loop(net, optimizer, step_fn, budget, Schedule.from_cfg(self.cfg),
+                           (lambda: probe(self)) if probe is not None else None,
+                           grad_clip=float(grad_clip) if grad_clip else None, desc="neural_sdf")
+        stats.extra["n_params"] = self.n_params()
+        return stats
+
+
+FAMILY = NeuralSDF
