@@ -30,6 +30,8 @@ _BATCH = 65536  # points per field call when evaluating numpy arrays
 class SDFFamily(Representation):
     """Representation answering rays by sphere tracing its signed-distance field."""
 
+    needs_closed_surface = True  # signs come from the inside test
+
     def __init__(self, cfg: Mapping[str, Any], domain: float = 0.6):
         super().__init__(cfg, domain)
         self.trace_options = TraceOptions.from_cfg(self.cfg)
