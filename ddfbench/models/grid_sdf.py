@@ -50,6 +50,10 @@ class GridSDF(SDFFamily):
         self._volume: torch.Tensor | None = None  # (1, 1, n, n, n) float32 for grid_sample
 
     def _set_grid(self, grid: np.ndarray) -> None:
+        """Store the grid in its storage dtype; float16 clamps to ±65504 (its range) so no value becomes inf."""
+        grid = np.nan_to_num(np.asarray(grid, np.float32), nan=0.0, posinf=np.inf, neginf=-np.inf)
+        if _DTYPES[self.dtype] == np.float16:
+            grid = np.clip(grid, -65504.0, 65504.0)
         self.grid = np.ascontiguousarray(grid, _DTYPES[self.dtype])
         self._volume = torch.from_numpy(self.grid.astype(np.float32))[None, None].to(self.device)
 
