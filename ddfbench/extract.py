@@ -2,7 +2,7 @@
 
 API (stable; families call only these):
 
-    mesh, info = sdf_to_mesh(fn, resolution, domain, batch=65536, coarse=1)         # signed field, level 0
+    mesh, info = sdf_to_mesh(fn, resolution, domain, batch=65536, coarse=1, lipschitz=1.0, carry=False)  # level 0
     mesh, info = udf_to_mesh(fn, resolution, domain, level, batch=65536, coarse=1)  # unsigned field, level > 0
     mesh, info = field_to_mesh(values, domain, level)                        # a grid you already have
 
@@ -100,40 +100,115 @@ def field_to_mesh(values: np.ndarray, domain: float, level: float):
     return mesh, info
 
 
-def banded_grid(fn: Field, resolution: int, domain: float, level: float, coarse: int = 1,
-                lipschitz: float = 1.0, batch: int = 65536) -> tuple[np.ndarray, int]:
-    """Field values on the (R, R, R) grid, evaluating densely only near the `level` set.
+def _evaluate_carry(fn: Field, points: np.ndarray, parent: np.ndarray | None, batch: int):
+    """fn(points, parent_state) -> (values, state) in batches -> ((N,) float32, (N, m) state)."""
+    values, states = np.empty(len(points), np.float32), []
+    for s in range(0, len(points), batch):
+        v, st = fn(points[s : s + batch], None if parent is None else parent[s : s + batch])
+        values[s : s + batch] = np.asarray(v, np.float32).reshape(-1)
+        states.append(np.asarray(st))
+    return values, (np.concatenate(states) if states else None)
 
-    coarse > 1 first evaluates every coarse-th node; a fine node whose nearest coarse node
-    has |value - level| > lipschitz * (distance to it + one grid step) is not next to a
-    crossing and takes that coarse value instead of an evaluation (the mesh is then the
-    dense grid's mesh for a field with that Lipschitz bound). Returns (values (R, R, R) float32, number of points evaluated).
+
+def lattice(resolution: int, stride: int) -> np.ndarray:
+    """Axis indices of the lattice with the given stride: every stride-th node and the last one."""
+    return np.unique(np.r_[np.arange(0, resolution, stride), resolution - 1])
+
+
+def banded_grid(fn: Field, resolution: int, domain: float, level: float, coarse: int = 1,
+                lipschitz: float = 1.0, batch: int = 65536, carry: bool = False) -> tuple[np.ndarray, int]:
+    """Field values on the (R, R, R) grid, evaluated only near the `level` set, coarse to fine.
+
+    coarse > 1: the first lattice takes every s-th node (s: coarse rounded up to a power of two);
+    each finer lattice (stride s/2, ..., 1) evaluates a new node only where the bound carried from
+    its nearest node of the previous lattice, |v(parent) - level| - lipschitz * |x - parent|, is not
+    positive; a skipped node takes its parent's value (for a field with that Lipschitz constant,
+    on the right side of the level) and the reduced bound. Last, both ends of every grid edge that
+    crosses the level are evaluated (a few rounds, until none is left), so marching cubes
+    interpolates true values and the mesh equals the dense grid's. NaN values always refine.
+    carry=True: fn(points, parent_state) -> (values (N,), state (N, m)); parent_state is None on
+    the first lattice, then each point's parent's state (a field passes down what it learned at
+    a coarse node, e.g. the DDF's best directions; skipped nodes inherit it).
+    Returns (values (R, R, R) float32, number of points evaluated).
     """
-    if int(coarse) <= 1:
-        pts = grid_points(resolution, domain)
-        return evaluate(fn, pts, batch).reshape((resolution,) * 3), len(pts)
-    axis = grid_axis(resolution, domain)
-    idx = np.unique(np.r_[np.arange(0, resolution, coarse), resolution - 1])
-    ca = axis[idx]
-    coarse_vals = evaluate(fn, np.stack(np.meshgrid(ca, ca, ca, indexing="ij"), -1).reshape(-1, 3), batch)
-    coarse_vals = np.nan_to_num(coarse_vals.reshape((len(idx),) * 3), nan=level, posinf=np.inf)
-    nearest = np.abs(np.arange(resolution)[:, None] - idx[None, :]).argmin(1)  # fine -> coarse index
-    values = coarse_vals[np.ix_(nearest, nearest, nearest)]
-    # a skipped node stays more than one grid step (times lipschitz) from the level, so no
-    # crossing edge ever touches it and the mesh equals the dense one
-    step = float(axis[1] - axis[0])
-    reach = lipschitz * (np.sqrt(3) * np.abs(axis - ca[nearest]).max() + step)
-    todo = np.abs(values - level) <= reach
-    fine = np.stack(np.meshgrid(axis, axis, axis, indexing="ij"), -1)[todo]
-    values[todo] = evaluate(fn, fine, batch)
-    return values, int(coarse_vals.size + len(fine))
+    R = int(resolution)
+    axis = grid_axis(R, domain)
+    stride = 1
+    while stride < int(coarse) and stride * 2 < R:
+        stride *= 2
+
+    def run(points, parent):
+        if carry:
+            return _evaluate_carry(fn, points, parent, batch)
+        return evaluate(fn, points, batch), None
+
+    def fill(go, parent_state):
+        """Evaluate the nodes go (tuple of index arrays) into values, slack, state, done."""
+        v, st = run(np.stack([axis[g] for g in go], -1), parent_state)
+        values[go], slack[go], done[go] = v, np.nan_to_num(np.abs(v - level), nan=0.0), True
+        if state is not None:
+            state[go] = st
+        return len(v)
+
+    idx = lattice(R, stride)
+    pts = np.stack(np.meshgrid(axis[idx], axis[idx], axis[idx], indexing="ij"), -1).reshape(-1, 3)
+    v, st = run(pts, None)
+    if stride == 1:
+        return v.reshape((R,) * 3), len(pts)
+    values = np.zeros((R,) * 3, np.float32)
+    slack = np.zeros((R,) * 3, np.float32)  # a lower bound of |field - level|, same side as the value
+    done = np.zeros((R,) * 3, bool)  # evaluated, not inherited
+    state = None if st is None else np.zeros((R,) * 3 + st.shape[1:], st.dtype)
+    ijk = np.ix_(idx, idx, idx)
+    values[ijk] = v.reshape((len(idx),) * 3)
+    slack[ijk] = np.nan_to_num(np.abs(v - level), nan=0.0).reshape((len(idx),) * 3)
+    done[ijk] = True
+    if state is not None:
+        state[ijk] = st.reshape((len(idx),) * 3 + st.shape[1:])
+    step, evals = float(axis[1] - axis[0]), len(pts)
+    while stride > 1:
+        prev, stride = idx, stride // 2
+        idx = lattice(R, stride)
+        near = prev[np.abs(idx[:, None] - prev[None, :]).argmin(1)]  # parent axis index of each node
+        old = np.isin(idx, prev)
+        a, b, c = np.nonzero(~(old[:, None, None] & old[None, :, None] & old[None, None, :]))
+        node, parent = (idx[a], idx[b], idx[c]), (near[a], near[b], near[c])
+        gap = step * np.sqrt(sum((n - p).astype(np.float32) ** 2 for n, p in zip(node, parent)))
+        bound = slack[parent] - lipschitz * gap
+        todo = bound <= 0
+        skip = tuple(n[~todo] for n in node)
+        values[skip] = values[tuple(p[~todo] for p in parent)]
+        slack[skip] = bound[~todo]
+        if state is not None:
+            state[skip] = state[tuple(p[~todo] for p in parent)]
+        if todo.any():
+            evals += fill(tuple(n[todo] for n in node), None if state is None else state[tuple(p[todo] for p in parent)])
+    for _ in range(3):  # ends of crossing edges that still hold an inherited value
+        go = np.nonzero(_crossing_ends(values, level) & ~done)
+        if not len(go[0]):
+            break
+        evals += fill(go, None if state is None else state[go])
+    return values, evals
+
+
+def _crossing_ends(values: np.ndarray, level: float) -> np.ndarray:
+    """(R, R, R) bool: nodes at either end of a grid edge whose values straddle the level."""
+    above = ~(values <= level)  # NaN counts as above, as in field_to_mesh
+    out = np.zeros(values.shape, bool)
+    for ax in range(3):
+        lo, hi = [slice(None)] * 3, [slice(None)] * 3
+        lo[ax], hi[ax] = slice(None, -1), slice(1, None)
+        cross = above[tuple(lo)] != above[tuple(hi)]
+        out[tuple(lo)] |= cross
+        out[tuple(hi)] |= cross
+    return out
 
 
 def sdf_to_mesh(fn: Field, resolution: int, domain: float, batch: int = 65536, coarse: int = 1,
-                lipschitz: float = 1.0):
+                lipschitz: float = 1.0, carry: bool = False):
     """Signed field (negative inside) -> marching cubes at level 0 -> (mesh, info). See banded_grid."""
     t0 = time.perf_counter()
-    values, evals = banded_grid(fn, resolution, domain, 0.0, coarse, lipschitz, batch)
+    values, evals = banded_grid(fn, resolution, domain, 0.0, coarse, lipschitz, batch, carry)
     mesh, info = field_to_mesh(values, domain, 0.0)
     info.update(field_evals=evals, seconds=time.perf_counter() - t0)
     return mesh, info

@@ -32,16 +32,59 @@ def test_box_sdf_mesh_spans_the_box():
     assert np.allclose(mesh.bounds[1], half, atol=0.01) and np.allclose(mesh.bounds[0], -half, atol=0.01)
 
 
-def test_narrow_band_matches_dense_grid_and_evaluates_less():
+def crossing_nodes(values, level=0.0):
+    """Brute force: nodes with a 6-neighbour on the other side of the level."""
+    above = values > level
+    out = np.zeros(values.shape, bool)
+    for ax in range(3):
+        for shift in (1, -1):
+            other = np.roll(above, shift, axis=ax)
+            edge = np.ones(values.shape, bool)
+            idx = [slice(None)] * 3
+            idx[ax] = 0 if shift == 1 else -1
+            edge[tuple(idx)] = False  # np.roll wraps around: no edge there
+            out |= edge & (other != above)
+    return out
+
+
+@pytest.mark.parametrize("coarse", [4, 8])
+def test_narrow_band_matches_dense_grid_and_evaluates_less(coarse):
     dense, n_dense = banded_grid(sphere_sdf, 65, 0.6, 0.0, coarse=1)
-    band, n_band = banded_grid(sphere_sdf, 65, 0.6, 0.0, coarse=4)
-    assert n_band < n_dense / 3
+    band, n_band = banded_grid(sphere_sdf, 65, 0.6, 0.0, coarse=coarse)
+    assert n_band < n_dense / 5
     assert np.array_equal(np.sign(band), np.sign(dense))
-    near = np.abs(dense) < 1.2 / 64  # within one grid step: always evaluated
-    assert np.allclose(band[near], dense[near])
+    ends = crossing_nodes(dense)
+    assert ends.sum() > 1000 and np.array_equal(band[ends], dense[ends])
     m1, _ = sdf_to_mesh(sphere_sdf, 65, 0.6)
-    m2, _ = sdf_to_mesh(sphere_sdf, 65, 0.6, coarse=4)
+    m2, _ = sdf_to_mesh(sphere_sdf, 65, 0.6, coarse=coarse)
     assert np.allclose(np.sort(m1.vertices, axis=0), np.sort(m2.vertices, axis=0))
+
+
+def test_narrow_band_finds_a_feature_thinner_than_the_coarse_lattice():
+    """A plate 0.03 thick (a quarter of the first lattice's spacing) between coarse nodes."""
+    plate = lambda p: np.abs(p[:, 2] - 0.013) - 0.015  # noqa: E731 (exact distance, Lipschitz 1)
+    dense, _ = banded_grid(plate, 97, 0.6, 0.0, coarse=1)
+    band, _ = banded_grid(plate, 97, 0.6, 0.0, coarse=8)
+    assert (dense < 0).any() and np.array_equal(np.sign(band), np.sign(dense))
+
+
+def test_carry_hands_each_node_the_state_of_a_coarse_node_near_it():
+    axis = np.linspace(-0.6, 0.6, 33, dtype=np.float32)
+    step, calls = axis[1] - axis[0], []
+
+    def field(p, parent):
+        calls.append(parent is None)
+        if parent is None:  # state: the coarse node's own coordinates, passed down unchanged
+            return sphere_sdf(p), p.copy()
+        assert np.isin(np.round(parent, 5), np.round(axis[::4], 5)).all()
+        # nearest node of each lattice in turn: at most 2 + 1 steps per axis from the coarse node
+        assert (np.abs(p - parent) <= 3 * step + 1e-6).all()
+        return sphere_sdf(p), parent
+
+    values, _ = banded_grid(field, 33, 0.6, 0.0, coarse=4, carry=True)
+    assert calls[0] and not all(calls[1:]) and len(calls) > 1
+    plain, _ = banded_grid(sphere_sdf, 33, 0.6, 0.0, coarse=4)
+    assert np.array_equal(values, plain)
 
 
 def test_udf_gives_two_shells_at_the_level():

@@ -38,7 +38,7 @@ import trimesh
 from torch import nn
 
 from ddfbench.errors import InputError
-from ddfbench.extract import udf_to_mesh
+from ddfbench.extract import sdf_to_mesh, udf_to_mesh
 from ddfbench.representation import Budget, FitData, FitStats, Hits, Probe, RayStatus, Representation
 from ddfbench.train import Schedule, seed_everything, train_loop
 
@@ -48,11 +48,13 @@ DEFAULTS: dict[str, Any] = {
     "visibility": "head", "loss": "l1", "delta": 1.0, "clamp_hit_ratio": 0.95, "vis_weight": 1.0,
     "batch_size": 2048, "lr": 2e-3, "weight_decay": 0.0, "lr_schedule": "cosine", "lr_final_ratio": 0.01,
     "lr_warmup": 0.0, "grad_clip": 1.0,
+    "mesh_field": "signed", "mesh_directions": 32, "mesh_keep": 8, "mesh_band": 0.03, "mesh_rank": 3, "mesh_coarse": 8, "mesh_lipschitz": 1.5,
     "udf_directions": 16, "udf_rank": 3, "udf_level_steps": 0.75, "udf_coarse": 4, "udf_lipschitz": 1.5, "udf_project": True,
     "storage_dtype": "float32", "eval_batch": 65536,
 }
 _CHOICES = {"activation": ("relu", "softplus"), "direction": ("vector", "angles"), "param": ("point", "ray"),
-            "visibility": ("head", "clamp"), "loss": ("l1", "clamp"), "storage_dtype": ("float32", "float16")}
+            "visibility": ("head", "clamp"), "loss": ("l1", "clamp"), "storage_dtype": ("float32", "float16"),
+            "mesh_field": ("signed", "udf")}
 
 
 def fibonacci_directions(k: int) -> np.ndarray:
@@ -76,6 +78,25 @@ def box_entry(origins: np.ndarray, directions: np.ndarray, half: float) -> tuple
     hi = np.where(np.isnan(t1), np.inf, np.maximum(t0, t1)).min(1)
     t_entry = np.maximum(lo, 0.0)
     return t_entry.astype(np.float32), hi.astype(np.float32), hi >= t_entry
+
+
+def line_vote(s: np.ndarray, keep: int, band: float, rank: int) -> tuple[np.ndarray, np.ndarray]:
+    """Signed value (N,) from line distances s (N, J) (+inf: the line misses), and the column indices
+    (N, keep) of the `keep` lines nearest zero.
+
+    Truncated mean, as in depth-map fusion: each line votes its distance clipped to +-band, lines
+    that crossed the surface more than `band` before the point (behind another part, or deep inside)
+    abstain; one extra vote of -band (a prior) makes a point with few votes inside. Near a surface the lines facing it agree
+    (s ~ +-distance / cos), so a few wrong lines are outvoted. Where the mean passes band / 2 the
+    value becomes the rank-th smallest |s| with its sign: a distance bound for the narrow band.
+    """
+    votes = np.abs(s) <= band
+    clipped = np.where(s > band, band, np.where(votes, s, 0.0))  # misses and far-ahead lines vote +band
+    mean = (clipped.sum(1) - band) / ((s > -band).sum(1) + 1)
+    size = np.partition(np.abs(s), min(int(rank), s.shape[1]) - 1, axis=1)[:, min(int(rank), s.shape[1]) - 1]
+    value = np.where(np.abs(mean) < band / 2, mean, np.sign(mean) * np.maximum(np.abs(mean), size))
+    order = np.argsort(np.abs(s), axis=1, kind="stable")[:, : min(int(keep), s.shape[1])]
+    return value.astype(np.float32), order
 
 
 class PositionalEncoding(nn.Module):
@@ -137,7 +158,8 @@ def _resolved(cfg: Mapping[str, Any]) -> dict[str, Any]:
     for key, allowed in _CHOICES.items():
         if out[key] not in allowed:
             raise InputError(f"model.{key} '{out[key]}': unknown (one of {', '.join(allowed)})")
-    for key in ("width", "depth", "batch_size", "udf_directions", "udf_rank", "eval_batch"):
+    for key in ("width", "depth", "batch_size", "udf_directions", "udf_rank", "eval_batch", "mesh_directions",
+                "mesh_keep", "mesh_rank", "mesh_coarse"):
         if int(out[key]) < 1:
             raise InputError(f"model.{key} {out[key]}: must be a positive integer")
     if out["loss"] == "clamp" or out["visibility"] == "clamp":
@@ -248,8 +270,52 @@ class DDF(Representation):
         r = min(int(rank), k) - 1
         return np.partition(per_dir, r, axis=1)[:, r] if r else per_dir.min(1)
 
+    def line_distance(self, points: np.ndarray, directions: np.ndarray) -> np.ndarray:
+        """Signed distance (N,) from each point to the first surface crossing of its line along its unit
+        direction (N,3), as seen from where the line enters the field box: >= 0 when the point lies
+        before that crossing (the surface is that far ahead), < 0 past it, +inf where the line misses.
+
+        One query per line, at its box entry: the same query intersect makes for a camera ray.
+        """
+        points, directions = np.asarray(points, np.float32), np.asarray(directions, np.float32)
+        back = box_entry(points, -directions, self.domain)[1]  # distance back to the box boundary
+        dist, hit = self._forward_np(points - back[:, None] * directions, directions)
+        return np.where(hit, dist - back, np.inf).astype(np.float32)
+
+    def signed_distance(self, points: np.ndarray, directions: np.ndarray) -> np.ndarray:
+        """Signed field (N,) from the line distances over unit directions (J, 3) (see line_vote, with
+        mesh_keep, mesh_band, mesh_rank). Zero on the predicted surface, negative past it."""
+        points, dirs = np.asarray(points, np.float32), np.asarray(directions, np.float32)
+        s = self.line_distance(np.repeat(points, len(dirs), axis=0), np.tile(dirs, (len(points), 1)))
+        return self._vote(s.reshape(len(points), len(dirs)))[0]
+
+    def _vote(self, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        c = self.cfg
+        return line_vote(s, int(c["mesh_keep"]), float(c["mesh_band"]), int(c["mesh_rank"]))
+
+    def _mesh_field(self, dirs: np.ndarray):
+        """The carry field of to_mesh: signed_distance over all directions on the first lattice; finer
+        nodes query only their parent's mesh_keep chosen directions (the lines that see the surface)."""
+
+        def field(points: np.ndarray, parent: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+            idx = np.broadcast_to(np.arange(len(dirs)), (len(points), len(dirs))) if parent is None else parent
+            s = self.line_distance(np.repeat(points, idx.shape[1], axis=0), dirs[idx].reshape(-1, 3)).reshape(idx.shape)
+            value, order = self._vote(s)
+            return value, np.take_along_axis(idx, order, axis=1).astype(np.int16)
+
+        return field
+
     def to_mesh(self, resolution: int) -> trimesh.Trimesh:
-        """Marching cubes of the UDF at udf_level_steps grid steps; shell vertices projected if udf_project."""
+        """Marching cubes of the signed line field at 0 (mesh_field "signed"), or of the UDF shell
+        at udf_level_steps grid steps with shell vertices projected if udf_project ("udf", the paper)."""
+        if self.cfg["mesh_field"] == "signed":
+            dirs = fibonacci_directions(int(self.cfg["mesh_directions"]))
+            mesh, info = sdf_to_mesh(
+                self._mesh_field(dirs), int(resolution), self.domain, batch=max(1, int(self.cfg["eval_batch"]) // int(self.cfg["mesh_keep"])),
+                coarse=int(self.cfg["mesh_coarse"]), lipschitz=float(self.cfg["mesh_lipschitz"]), carry=True,
+            )
+            self.extract_info = info
+            return mesh
         dirs = fibonacci_directions(int(self.cfg["udf_directions"]))
         step = 2 * self.domain / (int(resolution) - 1)
         level = float(self.cfg["udf_level_steps"]) * step

@@ -27,21 +27,22 @@ def _experiment(records: list[dict[str, Any]], records_dir: str) -> str:
     return names.most_common(1)[0][0] if names else os.path.basename(os.path.normpath(records_dir))
 
 
-def _sweep_lines(records_dir: str) -> list[str]:
-    """The sweep's status (done / failed / missing), or one line saying why it is unknown."""
+def _sweep_lines(records_dir: str, sweep: list[str] | None) -> list[str]:
+    """The sweep's status (done / failed / missing), or one line saying why it is unknown.
+    sweep: the sweep's overrides (default: the newest sweep of this experiment, see status.py)."""
     try:
         from ddfbench.report import status
     except ImportError:
         return []
     try:
-        st = status.sweep_status(records_dir)
+        st = status.sweep_status(records_dir, sweep)
     except Exception as exc:  # the status is an extra: a report is still written without it
         return [f"Sweep status unknown ({type(exc).__name__}: {str(exc).strip().splitlines()[0] if str(exc) else ''})."]
     return ["```", status.format_status(records_dir, st), "```"]
 
 
 def write_report(records_dir: str, out_dir: str, note: str | None = None,
-                 kinds: tuple[str, ...] | None = None) -> str:
+                 kinds: tuple[str, ...] | None = None, sweep: list[str] | None = None) -> str:
     """Write the tables, plots and report.md for the records below records_dir; return the markdown table."""
     records = find_records(records_dir)
     df = summarize(records)
@@ -59,7 +60,7 @@ def write_report(records_dir: str, out_dir: str, note: str | None = None,
         lines += [f"**{note}**", ""]
     shas = sorted({str((r.get("env") or {}).get("git_sha")) for r in records})
     lines += [f"{len(records)} run records from `{records_dir}` (code: {', '.join(shas) or 'unknown'}).", ""]
-    lines += _sweep_lines(records_dir) + ["", md]
+    lines += _sweep_lines(records_dir, sweep) + ["", md]
     lines += [f"![{os.path.basename(p)}]({os.path.basename(p)})" for p in written if p.endswith(".png")]
     lines += ["", "Record keys (config hashes) per row:", ""]
     if not df.empty:
@@ -77,6 +78,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--note", help="a line written at the top of report.md (e.g. 'reduced budget: ...')")
     parser.add_argument("--plots", help=f"comma-separated plot kinds ({', '.join(PLOTS)}; 'none' for no plot); "
                                         "default: by the experiment's name")
+    parser.add_argument("--sweep", nargs="+", metavar="OVERRIDE",
+                        help="the sweep's overrides for the status in report.md (default: its newest sweep)")
     parser.add_argument("--status", nargs="*", metavar="OVERRIDE",
                         help="print done / failed / missing runs of the sweep instead of writing a report")
     args = parser.parse_args(argv)
@@ -96,7 +99,7 @@ def main(argv: list[str] | None = None) -> int:
                   file=sys.stderr)
             return 2
     out = args.out or os.path.join("reports", os.path.basename(os.path.normpath(args.records)))
-    print(write_report(args.records, out, note=args.note, kinds=kinds))
+    print(write_report(args.records, out, note=args.note, kinds=kinds, sweep=args.sweep))
     print(f"wrote {out}/report.md, table.md, table.csv, table.tex and plots")
     return 0
 

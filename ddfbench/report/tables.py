@@ -63,7 +63,7 @@ def _num(value: Any) -> float:
         return math.nan
 
 
-def _override_labels(overrides: Iterable[str]) -> dict[str, str]:
+def override_labels(overrides: Iterable[str]) -> dict[str, str]:
     """{key: value} of a record's overrides, minus seeds and non-semantic keys (paths, threads, ...)."""
     out = {}
     for o in overrides or []:
@@ -94,6 +94,7 @@ def record_row(rec: dict[str, Any]) -> dict[str, Any]:
         "key": rec.get("key"), "status": rec.get("status"), "error": rec.get("error"),
         "experiment": rec.get("experiment"), "model": rec.get("model"), "family": rec.get("family"),
         "shape": (rec.get("shape") or {}).get("name"), "seed": (rec.get("config") or {}).get("seed"),
+        "empty": bool(m.get("empty_reconstruction")), "started": str(rec.get("started") or ""),
     }
     for name in METRICS:
         row[name] = _metric_value(name, m, c, s)
@@ -103,7 +104,7 @@ def record_row(rec: dict[str, Any]) -> dict[str, Any]:
     cfg: dict[str, Any] = {}
     _flatten("", {k: v for k, v in (rec.get("config") or {}).items() if k not in SEED_KEYS}, cfg)
     row["_config"] = cfg
-    row["_labels"] = _override_labels(rec.get("overrides") or [])
+    row["_labels"] = override_labels(rec.get("overrides") or [])
     return row
 
 
@@ -125,7 +126,8 @@ def summarize(records: Iterable[dict[str, Any]]) -> pd.DataFrame:
     """One row per configuration (seeds pooled).
 
     Columns: model, shape, one per varying override key (its value, None where a record lacks it),
-    n (ok runs), n_failed, n_expected (runs of the fullest row), errors, keys (record hashes),
+    n (ok runs), n_failed, n_expected (runs of the fullest row), n_empty (ok runs whose reconstruction
+    was empty: their metrics are the defined penalty), errors, keys (record hashes),
     <metric>_mean, <metric>_std, noise_floor_<metric>_mean.
     """
     rows = [record_row(r) for r in records]
@@ -138,7 +140,7 @@ def summarize(records: Iterable[dict[str, Any]]) -> pd.DataFrame:
         groups.setdefault(ident, []).append(r)
     n_expected = max(len(members) for members in groups.values())
     out = []
-    for members in groups.values():
+    for members in sorted(groups.values(), key=lambda ms: min(m["started"] for m in ms)):  # sweep order
         ok = [m for m in members if m["status"] == "ok"]
         entry: dict[str, Any] = {"model": members[0]["model"], "shape": members[0]["shape"]}
         for k in labels:
@@ -146,6 +148,7 @@ def summarize(records: Iterable[dict[str, Any]]) -> pd.DataFrame:
         entry["n"] = len(ok)
         entry["n_failed"] = len(members) - len(ok)
         entry["n_expected"] = n_expected
+        entry["n_empty"] = sum(m["empty"] for m in ok)
         entry["errors"] = "; ".join(sorted({m["error"] for m in members if m["error"]}))
         entry["keys"] = " ".join(sorted(m["key"] for m in members))
         for name in METRICS:
@@ -193,16 +196,18 @@ def _shown_metrics(df: pd.DataFrame) -> list[str]:
 
 
 def _label_columns(df: pd.DataFrame) -> list[str]:
-    hidden = {"n", "n_failed", "n_expected", "errors", "keys"}
+    hidden = {"n", "n_failed", "n_expected", "n_empty", "errors", "keys"}
     return [c for c in df.columns if not c.endswith(("_mean", "_std")) and c not in hidden]
 
 
 def best_mask(df: pd.DataFrame, metric: str) -> pd.Series:
-    """True where a row holds the best mean of `metric` among rows of its shape (ties all marked)."""
+    """True where a row holds the best mean of `metric` among rows of its shape (ties all marked;
+    nothing marked where a shape has one value or all its values are equal)."""
     col = df[f"{metric}_mean"].astype(float)
-    best = col.groupby(df["shape"]).transform("min" if METRICS[metric][2] == "low" else "max")
-    counts = col.groupby(df["shape"]).transform("count")
-    return col.notna() & (col == best) & (counts > 1)
+    by_shape = col.groupby(df["shape"])
+    best = by_shape.transform("min" if METRICS[metric][2] == "low" else "max")
+    spread = by_shape.transform("max") - by_shape.transform("min")
+    return col.notna() & (col == best) & (spread > 0)
 
 
 def _fmt(mean: float, std: float, scale: float) -> str:
@@ -217,7 +222,8 @@ def _n_cell(row: pd.Series) -> str:
     text = f"{row['n']}"
     if row["n"] < row["n_expected"]:
         text = f"{row['n']}/{row['n_expected']}{INCOMPLETE}"
-    return text + (f" ({row['n_failed']} failed)" if row["n_failed"] else "")
+    text += f" ({row['n_failed']} failed)" if row["n_failed"] else ""
+    return text + (f" ({row['n_empty']} empty)" if row.get("n_empty") else "")
 
 
 def _cells(df: pd.DataFrame, bold: tuple[str, str]) -> tuple[list[str], list[list[str]]]:
@@ -244,6 +250,8 @@ def _footnotes(df: pd.DataFrame) -> list[str]:
     lines = []
     if (df["n"] < df["n_expected"]).any():
         lines.append(f"{INCOMPLETE} fewer ok runs than the fullest row: its mean is over the ok runs only.")
+    if "n_empty" in df and (df["n_empty"] > 0).any():
+        lines.append("(k empty): k runs gave an empty reconstruction; their geometry metrics are the defined penalty.")
     for _, row in df[df["n_failed"] > 0].iterrows():
         lines.append(f"Failed ({row['model']}, {row['shape']}): {row['errors']}")
     return lines
