@@ -86,7 +86,8 @@ def _stages(cfg: Mapping[str, Any], rdir: str, device: str, seed: int, out: dict
     budget = Budget(max_steps=int(tr["max_steps"]), max_seconds=float(tr["max_seconds"]), device=device,
                     seed=seed, n_probes=int(tr.get("n_probes", 5)))
     gt_probe_points = sample_surface(shape.mesh, int(tr.get("probe_points", 5000)), seed + 7)[0]
-    probe = _probe_fn(gt_probe_points, min(64, int(ev["mesh_resolution"])), radii)
+    probe_res = min(int(tr.get("probe_resolution", 48)), int(ev["mesh_resolution"]))
+    probe = _probe_fn(gt_probe_points, probe_res, radii)
     t0 = time.perf_counter()
     stats = rep.fit(FitData(samples=samples, mesh=shape.mesh, oracle=oracle), budget, probe)
     cost["fit_wall_s"] = time.perf_counter() - t0

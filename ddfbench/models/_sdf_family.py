@@ -71,8 +71,14 @@ class SDFFamily(Representation):
         return to_hits(result, directions, nrm.detach().cpu().numpy(), valid.cpu().numpy(), evals, backward)
 
     def to_mesh(self, resolution: int) -> trimesh.Trimesh:
-        """Marching cubes of the field on a resolution^3 grid over the domain box (empty mesh flagged in last_mesh_info)."""
-        mesh, self.last_mesh_info = extract.sdf_to_mesh(self.sdf, int(resolution), self.domain)
+        """Marching cubes of the field on a resolution^3 grid over the domain box (empty mesh flagged in last_mesh_info).
+
+        cfg.extract_coarse > 1 evaluates coarse to fine, only near the surface, assuming the field's slope
+        is at most cfg.extract_lipschitz there (extract.banded_grid); 1 evaluates every node.
+        """
+        mesh, self.last_mesh_info = extract.sdf_to_mesh(
+            self.sdf, int(resolution), self.domain, coarse=int(self.cfg.get("extract_coarse", 1)),
+            lipschitz=float(self.cfg.get("extract_lipschitz", 1.0)))
         return mesh
 
 

@@ -35,7 +35,8 @@ __all__ = ["render_scene", "render", "parse_scene", "plan_passes", "Frames", "Sc
 
 def _timed_render(rep: Representation, scene: Scene, seed: int) -> tuple[Frames, dict[str, int], RenderTiming]:
     passes = plan_passes(scene)
-    (frames, counts), timing = time_renders(lambda: render(rep, scene, passes, seed), scene.repeats, scene.warmup)
+    (frames, counts), timing = time_renders(lambda: render(rep, scene, passes, seed), scene.repeats, scene.warmup,
+                                         scene.timing_max_seconds)
     return frames, counts, timing
 
 

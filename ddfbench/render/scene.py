@@ -57,6 +57,7 @@ class Scene:
     chunk: int  # most rays per intersect call
     repeats: int  # timed warm renders
     warmup: int  # untimed renders between the cold one and the timed ones
+    timing_max_seconds: float  # stop warm-up and repeats once this much render time is spent (>= 1 repeat)
 
 
 @dataclass(frozen=True)
@@ -198,6 +199,7 @@ def parse_scene(cfg: Mapping[str, Any]) -> Scene:
         chunk=_int(cfg, "chunk", 1 << 18, 1),
         repeats=_int(timing, "repeats", 3, 1),
         warmup=_int(timing, "warmup", 1, 0),
+        timing_max_seconds=_positive(timing, "max_seconds", 20.0),
     )
 
 

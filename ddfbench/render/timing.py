@@ -49,17 +49,29 @@ class RenderTiming:
         return len(self.warm_all_s)
 
 
-def time_renders(render: Callable[[], T], repeats: int, warmup: int) -> tuple[T, RenderTiming]:
-    """Call `render` 1 + warmup + repeats times; return the first (cold) result and the timings."""
+def time_renders(render: Callable[[], T], repeats: int, warmup: int,
+                 max_seconds: float = float("inf")) -> tuple[T, RenderTiming]:
+    """Call `render` 1 + warmup + repeats times; return the first (cold) result and the timings.
+
+    Once max_seconds of render time are spent, warm-up and repeats stop early (one timed warm
+    render always runs), so a slow family costs seconds, not minutes; RenderTiming.repeats says how many ran.
+    """
     start = clock()
     first = render()
-    cold = clock() - start
+    cold = spent = clock() - start
     for _ in range(warmup):
+        if spent >= max_seconds:
+            break
+        start = clock()
         render()
-    warm = []
+        spent += clock() - start
+    warm: list[float] = []
     for _ in range(repeats):
         start = clock()
         render()
         warm.append(clock() - start)
+        spent += warm[-1]
+        if spent >= max_seconds:
+            break
     q1, median, q3 = np.percentile(warm, [25, 50, 75])
     return first, RenderTiming(float(cold), float(median), float(q3 - q1), [float(x) for x in warm])

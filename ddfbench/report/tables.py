@@ -20,7 +20,7 @@ import pandas as pd
 
 from ddfbench.runs import NON_SEMANTIC_KEYS
 
-# column -> (header, display scale, better: "low" | "high")
+# column -> (header, display scale, better: "low" | "high" | "" (a setting, no best))
 METRICS: dict[str, tuple[str, float, str]] = {
     "chamfer_l2": ("CD-L2 ×10³", 1e3, "low"),
     "chamfer_l1": ("CD-L1 ×10³", 1e3, "low"),
@@ -35,7 +35,7 @@ METRICS: dict[str, tuple[str, float, str]] = {
     "normal_angle_deg": ("normal err °", 1.0, "low"),
     "storage_bytes": ("storage B", 1.0, "low"),
     "n_params": ("params", 1.0, "low"),
-    "n_samples": ("samples", 1.0, "low"),
+    "n_samples": ("samples", 1.0, ""),
     "sampling_s": ("sample s", 1.0, "low"),
     "fit_s": ("fit s", 1.0, "low"),
     "extract_s": ("extract s", 1.0, "low"),
@@ -204,6 +204,8 @@ def best_mask(df: pd.DataFrame, metric: str) -> pd.Series:
     """True where a row holds the best mean of `metric` among rows of its shape (ties all marked;
     nothing marked where a shape has one value or all its values are equal)."""
     col = df[f"{metric}_mean"].astype(float)
+    if not METRICS[metric][2]:
+        return pd.Series(False, index=df.index)
     by_shape = col.groupby(df["shape"])
     best = by_shape.transform("min" if METRICS[metric][2] == "low" else "max")
     spread = by_shape.transform("max") - by_shape.transform("min")

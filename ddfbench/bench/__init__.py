@@ -1,0 +1,17 @@
+"""`python -m ddfbench.bench`: ddfbench's own speed, every figure beside a reference measured in the
+same process (DESIGN.md, timing rules). One module per section:
+
+1. sampling     surface-sampling labels/s vs bare open3d cast_rays rays/s
+2. oracle       first-hit rays/s per backend (open3d, embreex), primary and incoherent rays
+3. ddf          DDF ray answering vs the bare network forward (+ backward), and vs Embree
+4. tracing      sphere tracer vs the naive all-rays loop: evaluations per pixel and time
+5. grid         level-set grid SDF build vs brute force: time and error
+6. metrics      chamfer + f-score + sided distance vs the bare KD-tree work
+7. training     samples/s per learned family vs a bare training step of its network
+8. end_to_end   the default run and the smoke sweep, wall time per stage
+
+Each section module has `run(ctx: Context) -> SectionResult`; timing.py measures, results.py holds
+the rows, sizes.py the problem sizes, table.py writes the outputs.
+"""
+
+SECTIONS = ("sampling", "oracle", "ddf", "tracing", "grid", "metrics", "training", "end_to_end")

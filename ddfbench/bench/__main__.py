@@ -1,0 +1,103 @@
+"""python -m ddfbench.bench [--device cpu|cuda|auto] [--sizes small|default] [--repeats N] [--warmup N]
+                            [--threads N] [--only sampling,oracle,...] [--out reports/bench]
+
+Runs the sections (see ddfbench.bench), prints the table and writes bench-<device>-<sizes>.md and
+.json into --out. A section that fails is reported as failed (its error in the table and the JSON)
+and the command exits 1 after the others have run.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime as dt
+import importlib
+import os
+import sys
+import tempfile
+import time
+
+import torch
+
+from ddfbench.bench import SECTIONS
+from ddfbench.bench.context import Context
+from ddfbench.bench.results import SectionResult
+from ddfbench.bench.sizes import SIZES
+from ddfbench.bench.table import to_markdown, write
+from ddfbench.errors import InputError
+from ddfbench.runs import environment
+from ddfbench.train import resolve_device
+
+
+def parse_sections(text: str) -> list[str]:
+    names = [s.strip() for s in text.split(",") if s.strip()]
+    unknown = [n for n in names if n not in SECTIONS]
+    if unknown or not names:
+        raise InputError(f"--only {text!r}: unknown section(s) {unknown} (known: {', '.join(SECTIONS)})")
+    return [s for s in SECTIONS if s in names]
+
+
+def run_section(name: str, ctx: Context) -> SectionResult:
+    """One section; an exception becomes a failed SectionResult with a one-line error."""
+    start = time.perf_counter()
+    try:
+        result = importlib.import_module(f"ddfbench.bench.{name}").run(ctx)
+    except Exception as err:  # the other sections still run; the exit code says something failed
+        first = (str(err).strip().splitlines() or [""])[0]
+        result = SectionResult(error=f"{type(err).__name__}: {first}")
+    result.seconds = time.perf_counter() - start
+    return result
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m ddfbench.bench", description=__doc__.splitlines()[0])
+    ap.add_argument("--device", default="cpu", help="cpu | cuda | auto (torch work; open3d and scipy stay on the CPU)")
+    ap.add_argument("--sizes", default="default", choices=sorted(SIZES),
+                    help="problem sizes (small: seconds, for tests)")
+    ap.add_argument("--repeats", type=int, default=5, help="timed warm calls per figure (median and IQR)")
+    ap.add_argument("--warmup", type=int, default=1, help="untimed calls after the cold one")
+    ap.add_argument("--threads", type=int, default=0,
+                    help="torch threads (0: torch's default); open3d and scipy use every core")
+    ap.add_argument("--only", default=",".join(SECTIONS), help="comma-separated sections to run")
+    ap.add_argument("--out", default=os.path.join("reports", "bench"), help="folder for the .md and .json")
+    args = ap.parse_args(argv)
+    try:
+        sections = parse_sections(args.only)
+        device = resolve_device(args.device)
+        if args.repeats < 1 or args.warmup < 0 or args.threads < 0:
+            raise InputError(f"--repeats {args.repeats} / --warmup {args.warmup} / --threads {args.threads}: "
+                             "need repeats >= 1, warmup >= 0, threads >= 0")
+    except InputError as err:
+        print(f"ddfbench.bench: {err}", file=sys.stderr)
+        return 2
+
+    if args.threads:
+        torch.set_num_threads(args.threads)
+    threads = torch.get_num_threads()
+    started, t0 = dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds"), time.perf_counter()
+    load = round(os.getloadavg()[0], 2) if hasattr(os, "getloadavg") else None
+    results: dict[str, SectionResult] = {}
+    with tempfile.TemporaryDirectory(prefix="ddfbench-bench-") as workdir:
+        shared = Context(device, {}, args.repeats, args.warmup, workdir, threads)
+        for name in sections:
+            print(f"[bench] {name} ...", file=sys.stderr, flush=True)
+            shared.sizes = SIZES[args.sizes][name]
+            results[name] = run_section(name, shared)
+            failed = f" FAILED {results[name].error}" if results[name].error else ""
+            print(f"[bench] {name}: {results[name].seconds:.1f} s{failed}", file=sys.stderr, flush=True)
+    doc = {
+        "command": "python -m ddfbench.bench " + " ".join(argv if argv is not None else sys.argv[1:]),
+        "started": started, "total_s": time.perf_counter() - t0, "load_average_start": load,
+        "options": {"device": device, "sizes": args.sizes, "repeats": args.repeats, "warmup": args.warmup,
+                    "sections": sections},
+        "env": environment(device, threads),
+        "sizes": {name: SIZES[args.sizes][name] for name in sections},
+        "sections": {name: r.as_dict() for name, r in results.items()},
+    }
+    print(to_markdown(doc))
+    md, js = write(doc, args.out, f"bench-{device.split(':')[0]}-{args.sizes}")
+    print(f"[bench] wrote {md} and {js}", file=sys.stderr)
+    return 1 if any(r.error for r in results.values()) else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

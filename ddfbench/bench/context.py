@@ -1,0 +1,54 @@
+"""What every section is given: the options, this section's sizes, and cached shapes and oracles."""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+from typing import Any
+
+from omegaconf import OmegaConf
+
+from ddfbench.oracle import Oracle
+from ddfbench.shapes import Shape, load_shape
+
+CONF_DIR = os.path.join(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))), "conf")
+DOMAIN = 0.6  # conf/config.yaml `domain`: half-side of the field box
+
+
+def preset(group: str, name: str, **overrides: Any) -> dict[str, Any]:
+    """conf/<group>/<name>.yaml as a plain dict (${domain} resolved), with overrides applied."""
+    path = os.path.join(CONF_DIR, group, f"{name}.yaml")
+    root = OmegaConf.create({"domain": DOMAIN, "node": OmegaConf.load(path)})
+    return {**OmegaConf.to_container(root, resolve=True)["node"], **overrides}
+
+
+def model_preset(family: str, **overrides: Any) -> dict[str, Any]:
+    """conf/model/<family>.yaml with overrides; the family's built-in defaults where it has no preset."""
+    if os.path.exists(os.path.join(CONF_DIR, "model", f"{family}.yaml")):
+        return preset("model", family, **overrides)
+    return {"family": family, **overrides}
+
+
+@dataclass
+class Context:
+    """device: "cpu" | "cuda[:k]"; sizes: this section's size parameters; repeats, warmup: timed and
+    untimed warm calls; workdir: scratch space for runs the section starts."""
+
+    device: str
+    sizes: dict[str, Any]
+    repeats: int
+    warmup: int
+    workdir: str
+    threads: int
+    _shapes: dict[str, Shape] = field(default_factory=dict)
+    _oracles: dict[tuple[str, str], Oracle] = field(default_factory=dict)
+
+    def shape(self, name: str) -> Shape:
+        if name not in self._shapes:
+            self._shapes[name] = load_shape({"name": name})
+        return self._shapes[name]
+
+    def oracle(self, name: str, backend: str = "open3d") -> Oracle:
+        if (name, backend) not in self._oracles:
+            self._oracles[(name, backend)] = Oracle(self.shape(name).mesh, backend=backend)
+        return self._oracles[(name, backend)]

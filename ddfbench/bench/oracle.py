@@ -1,0 +1,61 @@
+"""Section 2, oracle: first-hit rays/s of each backend (open3d, embreex) on primary and incoherent rays.
+
+Primary rays: one pinhole camera looking at the shape (ddfbench.trace_bench.pinhole_rays): coherent,
+neighbouring rays walk the same BVH nodes. Incoherent rays: origins uniform in the field box,
+directions uniform on the sphere. The reference for each is open3d's bare
+RaycastingScene.cast_rays on the very same rays, so the ratio of the open3d backend is what the
+Oracle wrapper keeps of the bare speed, and the embreex ratio compares the two Embree bindings.
+Sizes: shape, primary_px (image side), incoherent_rays.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import open3d as o3d
+
+from ddfbench.bench.context import DOMAIN, Context
+from ddfbench.bench.results import SectionResult, compare
+from ddfbench.bench.timing import measure_side_by_side
+from ddfbench.trace_bench import pinhole_rays
+
+BACKENDS = ("open3d", "embree")
+
+
+def incoherent_rays(n: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """n rays (n, 3), (n, 3): origins uniform in the field box, unit directions uniform on the sphere."""
+    rng = np.random.default_rng(seed)
+    d = rng.standard_normal((n, 3)).astype(np.float32)
+    return rng.uniform(-DOMAIN, DOMAIN, (n, 3)).astype(np.float32), d / np.linalg.norm(d, axis=1, keepdims=True)
+
+
+def bare_scene(mesh) -> o3d.t.geometry.RaycastingScene:
+    """open3d's RaycastingScene of the mesh, nothing around it."""
+    scene = o3d.t.geometry.RaycastingScene()
+    scene.add_triangles(o3d.core.Tensor(np.asarray(mesh.vertices, np.float32)),
+                        o3d.core.Tensor(np.asarray(mesh.faces, np.uint32)))
+    return scene
+
+
+def run(ctx: Context) -> SectionResult:
+    s = ctx.sizes
+    shape = ctx.shape(s["shape"])
+    scene = bare_scene(shape.mesh)
+    result = SectionResult(details={"faces": int(len(shape.mesh.faces))})
+    for kind, (o, d) in (("primary", pinhole_rays(int(s["primary_px"]))),
+                         ("incoherent", incoherent_rays(int(s["incoherent_rays"])))):
+        rays = o3d.core.Tensor(np.hstack([o, d]).astype(np.float32))
+        oracles = {backend: ctx.oracle(s["shape"], backend) for backend in BACKENDS}
+        fns = {"bare": lambda: scene.cast_rays(rays)}
+        fns.update({backend: (lambda orc=orc: orc.first_hit(o, d)) for backend, orc in oracles.items()})
+        timed = measure_side_by_side(fns, ctx.repeats, ctx.warmup)
+        n, bare = len(o), timed["bare"][1]
+        result.details[f"{kind}_bare_open3d"] = bare.as_dict()
+        for backend in BACKENDS:
+            (t, _, _), timing = timed[backend]
+            result.details[f"{kind}_{backend}"] = {**timing.as_dict(), "rays": n,
+                                                   "hit_share": float(np.isfinite(t).mean())}
+            result.rows.append(compare(
+                "oracle", f"Oracle.first_hit rays/s, backend {backend}, {kind} rays ({n})", timing.rate(n), "rays/s",
+                "bare open3d cast_rays rays/s, same rays", bare.rate(n), device="cpu", threads=ctx.threads,
+                note="CPU-only backends"))
+    return result

@@ -1,0 +1,38 @@
+"""Problem sizes per section: "default" (the committed run: the bunny, the issue's sizes, ~10 min on
+2 CPU cores) and "small" (tiny shapes and networks, seconds: for tests and quick checks)."""
+
+from __future__ import annotations
+
+LEARNED_FAMILIES = ["ddf", "neural_sdf", "gan_sdf"]
+
+SIZES: dict[str, dict[str, dict]] = {
+    "default": {
+        "sampling": {"shape": "bunny", "face_mode": "per_face", "s_fc": 1, "s_dr": 5, "s_p": 10,
+                     "bare_rays": 1_000_000},
+        "oracle": {"shape": "bunny", "primary_px": 384, "incoherent_rays": 500_000},
+        "ddf": {"shape": "bunny", "px": 160, "model": {}},
+        "tracing": {"shape": "bunny", "neural_px": 48, "grid_px": 96, "fit_seconds": 30.0, "n_samples": 200_000,
+                    "grid_resolution": 128, "neural": {}},
+        "grid": {"shape": "bunny", "resolutions": [64, 128, 256], "exact_full_max": 64, "exact_sample": 300_000},
+        "metrics": {"shape": "bunny", "points": [10_000, 100_000, 1_000_000], "repeats_max_points": 100_000},
+        "training": {"shape": "bunny", "families": LEARNED_FAMILIES, "steps": 6, "overrides": {}},
+        "end_to_end": {"runs": [{"name": "default run", "args": []},
+                                {"name": "smoke sweep", "args": ["+experiment=smoke"]}]},
+    },
+    "small": {
+        "sampling": {"shape": "sphere", "face_mode": "total", "s_fc": 1, "s_dr": 2, "s_p": 2, "bare_rays": 20_000},
+        "oracle": {"shape": "sphere", "primary_px": 32, "incoherent_rays": 4096},
+        "ddf": {"shape": "sphere", "px": 16, "model": {"width": 32, "depth": 2, "eval_batch": 4096}},
+        "tracing": {"shape": "sphere", "neural_px": 12, "grid_px": 16, "fit_seconds": 0.5, "n_samples": 5000,
+                    "grid_resolution": 16, "neural": {"width": 16, "depth": 2, "batch": 512}},
+        "grid": {"shape": "sphere", "resolutions": [12, 20], "exact_full_max": 12, "exact_sample": 2000},
+        "metrics": {"shape": "sphere", "points": [1000, 3000], "repeats_max_points": 1000},
+        "training": {"shape": "sphere", "families": LEARNED_FAMILIES, "steps": 3,
+                     "overrides": {"ddf": {"width": 32, "depth": 2, "batch_size": 256},
+                                   "neural_sdf": {"width": 16, "depth": 2, "batch": 256},
+                                   "gan_sdf": {"batch": 128}}},
+        "end_to_end": {"runs": [{"name": "tiny single run",
+                                 "args": ["shape=cube", "model=mesh", "eval=smoke", "scene=none", "sampling=random",
+                                          "sampling.n_samples=2000"]}]},
+    },
+}

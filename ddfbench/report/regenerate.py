@@ -1,0 +1,75 @@
+"""`python -m ddfbench.report.regenerate [--only E1,E2] [--results DIR] [--reports DIR] [-- OVERRIDE ...]`
+
+Regenerates the committed reports: for each experiment (default: ablation, sampling, representations,
+storage, render_time, pareto) runs `python -m ddfbench +experiment=<e> out_dir=<results> [OVERRIDE ...]`
+(finished runs are skipped, so an interrupted regeneration resumes), then writes
+`python -m ddfbench.report <results>/<e> --out <reports>/<e>`. With overrides the report's first line
+says "reduced budget: <overrides>" (or --note), so a report of a scaled run says how it was scaled.
+The wall time of each sweep is printed and written to <reports>/<e>/wall_time.txt.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import subprocess
+import sys
+import time
+
+from ddfbench.report.__main__ import write_report
+
+EXPERIMENTS = ("ablation", "sampling", "representations", "storage", "render_time", "pareto")
+
+
+def sweep_command(experiment: str, results: str, overrides: list[str]) -> list[str]:
+    """The command line that runs one experiment's sweep into results/<experiment>."""
+    return [sys.executable, "-m", "ddfbench", f"+experiment={experiment}", f"out_dir={results}", "quiet=true",
+            *overrides]
+
+
+def regenerate(experiment: str, results: str, reports: str, overrides: list[str], note: str | None,
+               run: bool = True) -> int:
+    """Run one experiment (unless run=False) and write its report; return the sweep's exit code."""
+    rc, seconds = 0, None
+    if run:
+        cmd = sweep_command(experiment, results, overrides)
+        print("$", " ".join(cmd[1:]), flush=True)
+        t0 = time.perf_counter()
+        rc = subprocess.run(cmd).returncode
+        seconds = time.perf_counter() - t0
+    out = os.path.join(reports, experiment)
+    if overrides and note is None:
+        note = "reduced budget: " + " ".join(overrides)
+    write_report(os.path.join(results, experiment), out, note=note, sweep=[f"+experiment={experiment}", *overrides])
+    if seconds is not None:
+        with open(os.path.join(out, "wall_time.txt"), "w") as fh:
+            fh.write(f"{seconds:.0f} s  {' '.join(sweep_command(experiment, results, overrides)[1:])}\n")
+        print(f"{experiment}: sweep exit {rc}, {seconds:.0f} s wall; report in {out}", flush=True)
+    return rc
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    overrides = argv[argv.index("--") + 1:] if "--" in argv else []
+    argv = argv[: argv.index("--")] if "--" in argv else argv
+    parser = argparse.ArgumentParser(prog="python -m ddfbench.report.regenerate", description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--only", help=f"comma-separated experiments (default: {','.join(EXPERIMENTS)})")
+    parser.add_argument("--results", default="results", help="out_dir of the runs (default: results)")
+    parser.add_argument("--reports", default="reports", help="report folder (default: reports)")
+    parser.add_argument("--note", help="first line of each report (default with overrides: 'reduced budget: ...')")
+    parser.add_argument("--report-only", action="store_true", help="write the reports from existing records only")
+    args = parser.parse_args(argv)
+    experiments = args.only.split(",") if args.only else list(EXPERIMENTS)
+    conf = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "conf", "experiment")
+    unknown = [e for e in experiments if not os.path.isfile(os.path.join(conf, f"{e}.yaml"))]
+    if unknown:
+        print(f"ddfbench.report.regenerate: --only {','.join(unknown)}: no conf/experiment/<name>.yaml", file=sys.stderr)
+        return 2
+    codes = [regenerate(e, args.results, args.reports, overrides, args.note, run=not args.report_only)
+             for e in experiments]
+    return max(codes, default=0)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,140 @@
+"""`python -m ddfbench.bench` at the tiniest sizes: the outputs' structure, ratios that are finite,
+positive and consistent with the figures beside them. No timing assertions."""
+
+import json
+import math
+
+import pytest
+import torch
+
+from ddfbench.bench import SECTIONS
+from ddfbench.bench.__main__ import main
+from ddfbench.bench.results import Target, compare
+from ddfbench.bench.timing import measure, measure_side_by_side, precision_context
+from ddfbench.trace import TraceOptions
+
+
+@pytest.fixture(scope="module")
+def small_run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("bench")
+    code = main(["--sizes", "small", "--repeats", "2", "--warmup", "0", "--out", str(out)])
+    doc = json.loads((out / "bench-cpu-small.json").read_text())
+    return code, doc, (out / "bench-cpu-small.md").read_text()
+
+
+def test_every_section_runs_and_every_ratio_is_finite_positive(small_run):
+    code, doc, _ = small_run
+    assert code == 0
+    assert list(doc["sections"]) == list(SECTIONS)
+    assert doc["env"]["device"] == "cpu" and doc["env"]["threads"] >= 1
+    for name, sec in doc["sections"].items():
+        assert sec["error"] is None, (name, sec["error"])
+        assert sec["rows"] and sec["notes"] == [], (name, sec["notes"])
+        for r in sec["rows"]:
+            assert r["section"] == name and r["device"] and r["precision"] == "fp32"
+            assert math.isfinite(r["ratio"]) and r["ratio"] > 0, r
+            assert r["value"] > 0 and r["reference_value"] > 0, r
+            num, den = ((r["reference_value"], r["value"]) if r["ratio_means"] == "reference / value"
+                        else (r["value"], r["reference_value"]))
+            assert r["ratio"] == pytest.approx(num / den, rel=1e-9)
+            assert (r["target"] is None) == (r["met"] is None)
+
+
+def test_each_issue_comparison_is_present(small_run):
+    _, doc, _ = small_run
+    rows = {name: [r["measure"] + " | " + r["reference"] for r in sec["rows"]] for name, sec in doc["sections"].items()}
+    assert any("open3d cast_rays" in r for r in rows["sampling"])
+    for backend in ("open3d", "embree"):
+        for kind in ("primary", "incoherent"):
+            assert any(f"backend {backend}, {kind}" in r for r in rows["oracle"])
+    for what in ("distance + visibility |", "+ normals |"):
+        assert any(what in r and "bare network" in r for r in rows["ddf"])
+        assert any(what in r and "Embree" in r for r in rows["ddf"])
+    for family in ("neural_sdf", "grid_sdf"):
+        assert any(r.startswith(f"{family}: field evaluations") for r in rows["tracing"])
+    assert len(rows["grid"]) == 2 and len(rows["metrics"]) == 2
+    assert {r.split(":")[0] for r in rows["training"]} == {"ddf", "neural_sdf", "gan_sdf"}
+    assert any(": sampling seconds" in r for r in rows["end_to_end"])
+
+
+def test_details_agree_with_what_was_measured(small_run):
+    _, doc, _ = small_run
+    s = doc["sections"]
+    for key, d in s["tracing"]["details"].items():
+        # the naive loop evaluates every ray twice per step for max_steps steps
+        assert d["naive_evals"] == 2 * TraceOptions().max_steps * d["rays"], key
+        assert 0 < d["tracer_evals"] < d["naive_evals"]
+    for key, d in s["grid"]["details"].items():
+        h = 2 * 0.6 / (int(key.split("=")[1]) - 1)
+        assert d["errors"]["max_err_band"] <= h  # the band is exact: only sign errors could reach it
+    for d in s["end_to_end"]["details"].values():
+        assert d["failed_jobs"] == 0 and d["jobs"] == 1
+        assert sum(d["stages_s"].values()) == pytest.approx(d["wall"]["median_s"], rel=1e-6)
+    assert s["ddf"]["details"]["ddf_fp32_normals=True"]["hit_share"] == 1.0  # every ray made a hit
+
+
+def test_markdown_has_a_table_row_per_json_row(small_run):
+    _, doc, md = small_run
+    for i, (name, sec) in enumerate(doc["sections"].items(), 1):
+        assert f"## {i}. {name}" in md
+    n_rows = sum(len(sec["rows"]) for sec in doc["sections"].values())
+    table_lines = [line for line in md.splitlines() if line.startswith("| ") and not line.startswith("| measure")]
+    assert len(table_lines) == n_rows
+    assert "device **cpu**" in md and "torch threads" in md
+
+
+def test_bad_options_are_refused(tmp_path, capsys):
+    assert main(["--only", "sampling,nonsense", "--out", str(tmp_path)]) == 2
+    assert "nonsense" in capsys.readouterr().err
+    assert main(["--repeats", "0", "--out", str(tmp_path)]) == 2
+    with pytest.raises(SystemExit):
+        main(["--sizes", "huge"])
+    assert not list(tmp_path.iterdir())
+
+
+def test_a_failing_section_is_reported_and_the_exit_code_says_so(tmp_path, monkeypatch):
+    from ddfbench.bench.sizes import SIZES
+
+    monkeypatch.setitem(SIZES["small"]["grid"], "shape", "no_such_shape")
+    assert main(["--sizes", "small", "--only", "grid,metrics", "--repeats", "1", "--out", str(tmp_path)]) == 1
+    doc = json.loads((tmp_path / "bench-cpu-small.json").read_text())
+    assert "no_such_shape" in doc["sections"]["grid"]["error"] and not doc["sections"]["grid"]["rows"]
+    assert doc["sections"]["metrics"]["error"] is None and doc["sections"]["metrics"]["rows"]
+    assert "**failed**" in (tmp_path / "bench-cpu-small.md").read_text()
+
+
+def test_measure_counts_calls_and_takes_the_median():
+    calls = []
+    first, t = measure(lambda: calls.append(len(calls)) or len(calls), repeats=5, warmup=2)
+    assert first == 1 and len(calls) == 8 and len(t.runs_s) == 5
+    ordered = sorted(t.runs_s)
+    assert t.median_s == ordered[2] and t.iqr_s >= 0 and t.threads == torch.get_num_threads()
+    assert t.rate(10) == pytest.approx(10 / t.median_s)
+
+
+def test_side_by_side_interleaves_figure_and_reference():
+    order = []
+    timed = measure_side_by_side({"a": lambda: order.append("a"), "b": lambda: order.append("b")}, repeats=3, warmup=1)
+    # cold calls, then a warm-up round and 3 timed rounds, each calling both, the order rotating
+    assert order == ["a", "b", "a", "b", "b", "a", "a", "b", "b", "a"]
+    assert all(len(t.runs_s) == 3 for _, t in timed.values())
+
+
+def test_precision_context_switches_autocast_and_rejects_unknown():
+    a = torch.ones(4, 4)
+    with precision_context("bf16", "cpu"):
+        assert (a @ a).dtype == torch.bfloat16
+    with precision_context("fp32", "cpu"):
+        assert (a @ a).dtype == torch.float32
+    with pytest.raises(ValueError):
+        with precision_context("fp8", "cpu"):
+            pass
+
+
+def test_compare_orients_ratios_and_checks_targets():
+    r = compare("s", "m", 2.0, "x/s", "ref", 8.0, device="cpu", threads=1, target=Target(">=", 0.3))
+    assert r.ratio == 0.25 and r.met is False and r.target == "ratio >= 0.3"
+    r = compare("s", "m", 2.0, "evals", "ref", 8.0, device="cpu", threads=1, inverse=True, target=Target(">=", 3))
+    assert r.ratio == 4.0 and r.met is True
+    r = compare("s", "m", 1.2, "s", "ref", 0.5, device="cpu", threads=1, target=Target("<=", 1.5, on="value"))
+    assert r.met is True and r.target == "<= 1.5 s"

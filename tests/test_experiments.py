@@ -1,0 +1,100 @@
+"""Experiment configs: each expands to the grid it documents, and the smoke sweep runs end to end
+(a subprocess, as CI runs it) into records and report files that all parse."""
+
+import functools
+import json
+import os
+import subprocess
+import sys
+
+import matplotlib.image
+import pandas as pd
+import pytest
+
+from ddfbench.report.plots import PLOTS_BY_EXPERIMENT
+from ddfbench.report.status import expected_grid
+from ddfbench.runs import RECORD_FIELDS, find_records
+
+FAMILIES = {"mesh", "grid_sdf", "ddf", "ddf_paper", "neural_sdf", "gan_sdf"}
+
+
+@functools.lru_cache(maxsize=None)
+def _grid(experiment, overrides):
+    jobs, _ = expected_grid(os.path.join("/nonexistent", experiment), [f"+experiment={experiment}", *overrides])
+    return jobs
+
+
+def grid(experiment, *overrides):
+    """The sweep's jobs as `--status` expands them (composed once per test session: composing is slow)."""
+    return _grid(experiment, overrides)
+
+
+def swept(job):
+    return dict(o.split("=", 1) for o in job.swept)
+
+
+@pytest.mark.parametrize("experiment,n_jobs", [("ablation", 7), ("ablation_grid", 27), ("sampling", 12),
+                                               ("representations", 32), ("storage", 24), ("pareto", 24),
+                                               ("render_time", 21), ("smoke", 18)])
+def test_experiment_expands_to_its_documented_grid(experiment, n_jobs, tmp_path):
+    jobs = grid(experiment)
+    assert len(jobs) == n_jobs
+    assert len({j.key for j in jobs}) == n_jobs  # every job is a distinct configuration
+
+
+def test_ablation_is_one_factor_at_a_time_and_shares_records_with_the_grid(tmp_path):
+    points = set()
+    for job in grid("ablation"):
+        levels = json.loads(swept(job)["sampling"].replace("s_fc", '"s_fc"').replace("s_dr", '"s_dr"')
+                            .replace("s_p", '"s_p"'))
+        points.add((levels["s_fc"], levels["s_dr"], levels["s_p"]))
+    expected = {(10, 10, 10)} | {tuple(v if i == k else 10 for i in range(3)) for k in range(3) for v in (20, 30)}
+    assert points == expected
+    assert {j.key for j in grid("ablation")} <= {j.key for j in grid("ablation_grid")}
+
+
+def test_budget_overrides_and_seeds_change_the_grid(tmp_path):
+    base = grid("sampling")
+    scaled = grid("sampling", "train.max_seconds=5", "seed=0,1")
+    assert len(scaled) == 2 * len(base)
+    assert not {j.key for j in base} & {j.key for j in scaled}  # a budget is part of the record key
+
+
+def test_capacity_sweeps_cover_every_family(tmp_path):
+    for experiment in ("storage", "pareto", "smoke"):
+        families = {swept(j)["+experiment/capacity"] for j in grid(experiment)}
+        assert families == FAMILIES, experiment
+
+
+def test_smoke_runs_every_family_and_strategy_and_reports(tmp_path):
+    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    run = subprocess.run([sys.executable, "-m", "ddfbench", "+experiment=smoke", f"out_dir={tmp_path}", "quiet=true"],
+                         capture_output=True, text=True, env=env, timeout=900)
+    assert run.returncode == 0, run.stderr[-3000:]
+    records = find_records(str(tmp_path / "smoke"))
+    expected = {j.key for j in grid("smoke")}
+    assert {r["key"] for r in records} == expected  # every record, under the hash of its config
+    for rec in records:
+        assert set(RECORD_FIELDS) <= set(rec)
+        assert rec["status"] == "ok", (rec["key"], rec["error"])
+    assert {r["model"] for r in records} == FAMILIES  # the ddf_paper preset is family ddf
+    assert {r["sampling"]["strategy"] for r in records} == {"random", "pov", "surface"}
+
+    out = tmp_path / "report"
+    rep = subprocess.run([sys.executable, "-m", "ddfbench.report", str(tmp_path / "smoke"), "--out", str(out)],
+                         capture_output=True, text=True, env=env, timeout=300)
+    assert rep.returncode == 0, rep.stderr[-3000:]
+    csv = pd.read_csv(out / "table.csv")
+    assert len(csv[csv["model"] != "noise floor"]) == len(expected)
+    assert csv["n"].fillna(1).min() >= 1 and (csv["n_failed"].fillna(0) == 0).all()
+    md = (out / "table.md").read_text().splitlines()
+    assert sum(line.startswith("| ") for line in md) == 1 + len(expected) + 1  # header, rows, noise floor
+    tex = (out / "table.tex").read_text()
+    assert tex.startswith(r"\begin{tabular}") and r"\end{tabular}" in tex and tex.count("{") == tex.count("}")
+    report = (out / "report.md").read_text()
+    assert "done 18  failed 0  missing 0" in report and all(k in report for k in expected)
+    for kind in PLOTS_BY_EXPERIMENT["smoke"]:
+        image = matplotlib.image.imread(out / f"{kind}.png")
+        assert image.ndim == 3 and image.shape[0] > 100 and image.shape[1] > 100
+        pdf = (out / f"{kind}.pdf").read_bytes()
+        assert pdf.startswith(b"%PDF") and b"%%EOF" in pdf[-32:]

@@ -1,0 +1,220 @@
+"""Report logic on synthetic records: Pareto front, seed pooling, flags, best marks, noise floor,
+plot selection of points, and the files `python -m ddfbench.report` writes."""
+
+import io
+import itertools
+import json
+import math
+
+import numpy as np
+import pandas as pd
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from ddfbench.report import plots, tables
+from ddfbench.report.__main__ import main as report_main
+from ddfbench.runs import write_json_atomic
+
+
+def make_record(model="ddf", shape="bunny", seed=0, chamfer=1e-3, status="ok", overrides=(), sampling=None,
+                cost=None, probes=(), floor=2e-5, width=64, key=None, scene=None):
+    """A record as the runner writes it, with only the fields the report reads."""
+    cfg = {"seed": seed, "model": {"family": model, "width": width}, "shape": {"name": shape}, "sampling": sampling or {}}
+    return {
+        "schema_version": 1, "key": key or f"{model}-{shape}-{width}-{seed}-{json.dumps(sampling, sort_keys=True)}",
+        "status": status, "error": None if status == "ok" else "fit of ddf failed: NaN loss",
+        "experiment": "synthetic", "family": model if not model.startswith("mesh") else "mesh", "model": model,
+        "shape": {"name": shape}, "sampling": sampling or {}, "scene": scene or {},
+        "metrics": {} if status != "ok" else {
+            "chamfer_l2": chamfer, "chamfer_l1": math.sqrt(chamfer), "fscore": {"0.01": 0.5},
+            "sided_gt_to_rec": {"mean": chamfer / 2}, "sided_rec_to_gt": {"mean": chamfer / 2},
+            "noise_floor": {"chamfer_l2": floor, "chamfer_l1": 0.004, "fscore": {"0.01": 0.9}}},
+        "cost": cost or {}, "counts": {}, "artifacts": {}, "flags": [],
+        "fit": {"probes": list(probes)}, "config": cfg,
+        "overrides": [f"model={model}", f"shape={shape}", f"seed={seed}", f"model.width={width}", *overrides],
+        "env": {"git_sha": "abc"},
+    }
+
+
+# ---------------------------------------------------------------- Pareto front
+
+def brute_force_front(x, y):
+    """Points no other point dominates (<= in both, < in one), finite only, as a set of indices."""
+    pts = [(i, a, b) for i, (a, b) in enumerate(zip(x, y)) if math.isfinite(a) and math.isfinite(b)]
+    keep = set()
+    for i, a, b in pts:
+        if not any((c <= a and d <= b) and (c < a or d < b) for j, c, d in pts if j != i):
+            keep.add(i)
+    return keep
+
+
+coord = st.one_of(st.integers(0, 6).map(float), st.just(math.nan), st.just(math.inf))
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.lists(st.tuples(coord, coord), min_size=0, max_size=12))
+def test_pareto_front_matches_brute_force(points):
+    x = [p[0] for p in points]
+    y = [p[1] for p in points]
+    front = plots.pareto_front(x, y)
+    expected = brute_force_front(x, y)
+    # among exact duplicates on the front only one is kept
+    assert {(x[i], y[i]) for i in front} == {(x[i], y[i]) for i in expected}
+    assert len(front) == len({(x[i], y[i]) for i in front})
+    assert list(np.array(x)[front]) == sorted(np.array(x)[front])  # ordered by cost
+    ys = np.array(y)[front]
+    assert np.all(np.diff(ys) < 0)  # and error falls strictly along it
+
+
+def test_pareto_front_of_a_known_set():
+    x = [1, 2, 3, 4, 2.5]
+    y = [5, 3, 3, 1, 4]
+    assert plots.pareto_front(x, y).tolist() == [0, 1, 3]
+
+
+# ---------------------------------------------------------------- tables
+
+def test_seeds_pool_into_mean_std_with_n():
+    recs = [make_record(seed=s, chamfer=c) for s, c in zip((0, 1, 2), (1e-3, 2e-3, 6e-3))]
+    recs += [make_record(width=128, seed=s, chamfer=5e-4) for s in (0, 1, 2)]
+    df = tables.summarize(recs)
+    assert len(df) == 2
+    row = df[df["model.width"] == "64"].iloc[0]
+    assert row["n"] == 3 and row["n_failed"] == 0
+    assert row["chamfer_l2_mean"] == pytest.approx(3e-3)
+    assert row["chamfer_l2_std"] == pytest.approx(np.std([1e-3, 2e-3, 6e-3], ddof=1))
+    assert set(row["keys"].split()) == {r["key"] for r in recs[:3]}
+
+
+def test_failed_and_missing_seeds_are_flagged_not_hidden():
+    recs = [make_record(seed=s) for s in (0, 1, 2)]
+    recs += [make_record(width=128, seed=0), make_record(width=128, seed=1, status="failed")]
+    recs += [make_record(width=256, seed=0)]  # two seeds never ran
+    df = tables.summarize(recs)
+    by_width = {r["model.width"]: r for _, r in df.iterrows()}
+    assert (by_width["128"]["n"], by_width["128"]["n_failed"], by_width["128"]["n_expected"]) == (1, 1, 3)
+    assert (by_width["256"]["n"], by_width["256"]["n_failed"]) == (1, 0)
+    md = tables.to_markdown(df)
+    assert "1/3† (1 failed)" in md and "| 1/3† |" in md and "| 3 |" in md
+    assert "NaN loss" in md and "fewer ok runs" in md
+
+
+def test_best_is_marked_per_shape_and_per_direction():
+    recs = [make_record(shape="bunny", width=w, chamfer=c) for w, c in ((64, 3e-3), (128, 1e-3))]
+    recs += [make_record(shape="cow", width=w, chamfer=c) for w, c in ((64, 2e-3), (128, 4e-3))]
+    df = tables.summarize(recs)
+    best = tables.best_mask(df, "chamfer_l2")
+    winners = {(r["shape"], r["model.width"]) for (_, r), b in zip(df.iterrows(), best) if b}
+    assert winners == {("bunny", "128"), ("cow", "64")}
+    df.loc[:, "fscore@0.01_mean"] = [0.1, 0.9, 0.8, 0.2]
+    high = {(r["shape"], r["model.width"]) for (_, r), b in zip(df.iterrows(), tables.best_mask(df, "fscore@0.01")) if b}
+    assert high == {("bunny", "128"), ("cow", "64")}
+    lines = [line.strip("|").split(" | ") for line in tables.to_markdown(df).splitlines() if line.startswith("| ")]
+    col = [c.strip() for c in lines[0]].index("CD-L2 ×10³")
+    assert [row[col].strip() for row in lines[1:5]] == ["3", "**1**", "**2**", "4"]  # x10^3, winners in bold
+
+
+def test_noise_floor_is_its_own_row_per_shape():
+    recs = [make_record(shape="bunny", floor=2e-5), make_record(shape="bunny", width=128, floor=4e-5),
+            make_record(shape="cow", floor=1e-5)]
+    df = tables.summarize(recs)
+    floors = tables.noise_floor_rows(df)
+    got = dict(zip(floors["shape"], floors["chamfer_l2_mean"]))
+    assert got == pytest.approx({"bunny": 3e-5, "cow": 1e-5})
+    md_rows = [line for line in tables.to_markdown(df).splitlines() if line.startswith("| noise floor")]
+    assert len(md_rows) == 2 and "| 0.03 |" in md_rows[0] + md_rows[1]  # 3e-5 x 10^3
+
+
+def test_rows_are_labelled_by_the_overrides_that_vary():
+    recs = [make_record(overrides=[f"capacity=c{i}", "train.max_seconds=15", "out_dir=/x"], width=w)
+            for i, w in ((1, 64), (2, 128))]
+    df = tables.summarize(recs)
+    assert "capacity" in df.columns and "train.max_seconds" not in df.columns and "out_dir" not in df.columns
+    assert sorted(df["capacity"]) == ["c1", "c2"]
+
+
+def test_markdown_latex_csv_render_the_same_numbers(tmp_path):
+    recs = [make_record(seed=s, chamfer=c) for s, c in ((0, 1e-3), (1, 3e-3))] + [make_record(width=128)]
+    df = tables.summarize(recs)
+    md, tex = tables.to_markdown(df), tables.to_latex(df)
+    tables.to_csv(df, tmp_path / "t.csv")
+    csv = pd.read_csv(tmp_path / "t.csv")
+    assert len(csv) == 3 and csv["model"].tolist()[-1] == tables.FLOOR_MODEL  # 2 configs + 1 floor row
+    assert csv["chamfer_l2_mean"].iloc[0] == pytest.approx(2e-3)  # unscaled in the CSV
+    assert "2 ± 1.4" in md  # x10^3 in the rendered tables
+    assert r"2 $\pm$ 1.4" in tex
+    assert tex.count("{") == tex.count("}") and tex.startswith(r"\begin{tabular}") and r"\end{tabular}" in tex
+    body = [line for line in tex.splitlines() if line.endswith(r"\\")]
+    assert len({line.count("&") for line in body}) == 1  # every row has as many cells as the header
+
+
+# ---------------------------------------------------------------- plot data
+
+def surface(fc, dr, p):
+    return {"strategy": "surface", "s_fc": fc, "s_dr": dr, "s_p": p}
+
+
+def test_ablation_lines_take_one_factor_at_a_time():
+    grid = list(itertools.product((10, 20, 30), repeat=3))
+    recs = [make_record(sampling=surface(*g), chamfer=1e-3 * sum(g)) for g in grid]
+    recs.append(make_record(sampling=surface(10, 10, 20), seed=1, chamfer=1e-3 * 50))  # a second seed
+    lines = plots.ablation_lines(recs)
+    assert [lv for lv, _, _ in lines["s_p"]] == [10, 20, 30]
+    assert lines["s_fc"] == [(10, pytest.approx(0.03), 0.0), (20, pytest.approx(0.04), 0.0), (30, pytest.approx(0.05), 0.0)]
+    assert lines["s_p"][1][1] == pytest.approx((0.04 + 0.05) / 2)  # seeds averaged
+    assert lines["s_p"][1][2] == pytest.approx(np.std([0.04, 0.05], ddof=1))
+
+
+def test_sampling_lines_follow_labels_per_strategy_and_skip_meshes():
+    recs = [make_record(sampling={"strategy": s, "n_samples": n}, chamfer=1 / n)
+            for s in ("random", "pov") for n in (4000, 1000, 2000)]
+    recs.append(make_record(model="mesh", sampling={"strategy": "random", "n_samples": 10}))
+    recs.append(make_record(sampling={"strategy": "pov", "n_samples": 8000}, status="failed"))
+    lines = plots.sampling_lines(recs)
+    assert set(lines) == {("ddf", "random"), ("ddf", "pov")}
+    assert [n for n, _, _ in lines[("ddf", "pov")]] == [1000, 2000, 4000]
+
+
+def test_report_command_writes_parseable_files(tmp_path):
+    probes = [{"step": s, "seconds": 0.1 * s, "chamfer_l2": 1e-2 / s} for s in (1, 2, 4, 8)]
+    recs = []
+    for i, (model, fc) in enumerate((("ddf", 10), ("ddf", 20), ("mesh_lod500", 10))):
+        recs.append(make_record(model=model, width=64 + i, sampling=surface(fc, 10, 10) | {"n_samples": 1000 * fc},
+                                probes=probes, scene={"width": 32, "height": 32},
+                                cost={"fit_s": 1.0 + i, "storage_bytes": 1e4 * (i + 1), "render_warm_s": 0.1,
+                                      "render_cold_s": 0.3}))
+    for r in recs:
+        write_json_atomic(str(tmp_path / "rec" / r["key"] / "record.json"), r)
+    out = tmp_path / "rep"
+    assert report_main([str(tmp_path / "rec"), "--out", str(out), "--note", "reduced budget: x=1",
+                        "--plots", "fit_curves,pareto,sampling,render_time,ablation"]) == 0
+    report = (out / "report.md").read_text()
+    assert report.splitlines()[2] == "**reduced budget: x=1**"
+    assert all(r["key"] in report for r in recs)
+    for kind in plots.PLOTS:
+        assert (out / f"{kind}.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+        pdf = (out / f"{kind}.pdf").read_bytes()
+        assert pdf.startswith(b"%PDF") and b"%%EOF" in pdf[-32:]
+    assert len(pd.read_csv(io.StringIO((out / "table.csv").read_text()))) == 4
+    assert report_main([str(tmp_path / "rec"), "--plots", "nope"]) == 2
+    assert report_main([str(tmp_path / "missing")]) == 2
+
+
+def test_every_experiment_has_a_plot_selection():
+    import os
+
+    conf = os.path.join(os.path.dirname(__file__), "..", "conf", "experiment")
+    names = {f[:-5] for f in os.listdir(conf) if f.endswith(".yaml")} - {"default", "ablation_grid"}
+    assert names <= set(plots.PLOTS_BY_EXPERIMENT)
+    assert all(set(k) <= set(plots.PLOTS) for k in plots.PLOTS_BY_EXPERIMENT.values())
+
+
+def test_equal_values_are_not_marked_and_empty_reconstructions_are_counted():
+    recs = [make_record(width=w, chamfer=8.64) for w in (64, 128)]
+    recs[1]["metrics"]["empty_reconstruction"] = True
+    df = tables.summarize(recs)
+    assert not tables.best_mask(df, "chamfer_l2").any()
+    assert sorted(df["n_empty"]) == [0, 1]
+    md = tables.to_markdown(df)
+    assert "**" not in md.split("\n\n")[0] and "1 (1 empty)" in md and "defined penalty" in md
