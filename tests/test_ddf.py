@@ -10,7 +10,7 @@ from omegaconf import OmegaConf
 
 from ddfbench.errors import InputError
 from ddfbench.models import load_family
-from ddfbench.models.ddf import DDF, box_entry, fibonacci_directions
+from ddfbench.models.ddf import DDF, box_entry, fibonacci_directions, line_entry_labels, line_vote
 from ddfbench.oracle import Oracle
 from ddfbench.representation import Budget, FitData, RayStatus
 from ddfbench.samples import Samples
@@ -83,9 +83,77 @@ def test_fit_reaches_small_error_on_a_sphere(fitted):
     assert np.isinf(hits.t[~hits.hit]).all()
 
 
-def test_mesh_of_the_udf_lies_on_the_sphere(fitted):
+def analytic_line_distance(x, d):
+    """Signed distance from x along d to the first crossing of the sphere by the line, seen from its box entry."""
+    back = box_entry(x, -d, 0.6)[1]
+    return analytic_hit(x - back[:, None] * d, d) - back
+
+
+def test_line_distance_matches_the_sphere_from_the_box_entry(fitted):
+    rep, _ = fitted
+    rng = np.random.default_rng(5)
+    x = rng.uniform(-0.5, 0.5, (4000, 3)).astype(np.float32)
+    d = unit(rng.normal(size=(4000, 3))).astype(np.float32)
+    s, truth = rep.line_distance(x, d), analytic_line_distance(x, d)
+    assert (np.isfinite(s) == np.isfinite(truth)).mean() > 0.95
+    clear = np.isfinite(s) & np.isfinite(truth) & (np.abs(truth) > 0.05)
+    assert (np.sign(s[clear]) == np.sign(truth[clear])).mean() > 0.97
+    both = np.isfinite(s) & np.isfinite(truth)
+    assert np.median(np.abs(s[both] - truth[both])) < 0.01
+
+
+def slab_lines(h, dirs, thickness=0.3):
+    """Line distances at height h above the top face z=0 of a solid slab -thickness < z < 0 (analytic)."""
+    dz = dirs[:, 2]
+    with np.errstate(divide="ignore"):
+        down = np.where(dz < -1e-3, h / -dz, np.inf)  # entering from above: the top face, h / |dz| ahead
+        up = np.where(dz > 1e-3, -(h + thickness) / dz, np.inf)  # entering from below: the bottom face, behind
+    return np.where(dz < 0, down, up)[None, :]
+
+
+def test_line_vote_takes_the_sign_of_the_side_and_outvotes_wrong_lines():
+    dirs = fibonacci_directions(32)
+    band = 0.02
+    heights = np.array([-0.1, -0.03, -0.005, 0.005, 0.03, 0.1])
+    values = np.array([line_vote(slab_lines(h, dirs), 12, band, 3)[0][0] for h in heights])
+    assert np.array_equal(np.sign(values), np.sign(heights))
+    assert np.all(np.diff(values) > 0)  # grows with the height through the surface
+    for h in (-0.1, -0.03, 0.03, 0.1):  # two lines claim a surface right at the point
+        s = slab_lines(h, dirs)
+        s[0, np.argsort(np.abs(s[0]))[-2:]] = 1e-3 * np.sign(-h)
+        assert np.sign(line_vote(s, 12, band, 3)[0][0]) == np.sign(h)
+    far = np.full((1, 32), np.inf)  # every line misses: far outside
+    assert line_vote(far, 12, band, 3)[0][0] > band
+
+
+def test_line_entry_labels_are_exact_on_the_sphere():
+    rng = np.random.default_rng(7)
+    n = 3000
+    x = rng.uniform(-0.6, 0.6, (n, 3)).astype(np.float32)
+    d = unit(rng.normal(size=(n, 3))).astype(np.float32)
+    x, d = np.r_[x, x], np.r_[d, -d]  # every point also looks the other way
+    hit = np.isfinite(analytic_hit(x, d))
+    xe, de, he = line_entry_labels(x, d, hit, 0.6)
+    assert np.allclose(np.abs(xe).max(1), 0.6, atol=1e-5)  # on the box boundary
+    assert np.array_equal(he, np.isfinite(analytic_hit(xe, de)))
+    both_miss = ~hit[:n] & ~hit[n:]
+    assert he.sum() == hit.sum() and (~he).sum() == 2 * both_miss.sum() > 100
+
+
+def test_signed_mesh_lies_on_the_sphere(fitted):
     rep, _ = fitted
     mesh = rep.to_mesh(40)
+    assert len(mesh.faces) > 100 and rep.extract_info["field_evals"] < 0.5 * 40**3
+    r = np.linalg.norm(mesh.vertices, axis=1)
+    assert np.median(np.abs(r - R0)) < 0.005
+    assert np.percentile(np.abs(r - R0), 90) < 0.02
+
+
+def test_paper_udf_mesh_lies_on_the_sphere(fitted):
+    rep, _ = fitted
+    udf = DDF({**rep.cfg, "mesh_field": "udf"})
+    udf.net.load_state_dict(rep.net.state_dict())
+    mesh = udf.to_mesh(40)
     assert len(mesh.faces) > 100
     r = np.linalg.norm(mesh.vertices, axis=1)
     assert np.median(np.abs(r - R0)) < 0.01
@@ -213,6 +281,12 @@ def test_bad_config_and_samples_raise_input_errors(sphere_oracle):
         DDF({"param": "polar"})
     with pytest.raises(InputError):
         DDF({"width": 0})
+    with pytest.raises(InputError):
+        DDF({"mesh_band": 0})
+    with pytest.raises(InputError):
+        DDF({"entry_share": 1.0})
+    with pytest.raises(InputError):
+        DDF({"mesh_field": "points"})
     with pytest.raises(InputError):
         DDF({"visibility": "clamp", "loss": "l1"})
     with pytest.raises(InputError):

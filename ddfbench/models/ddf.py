@@ -4,8 +4,15 @@ A ray (origin o, unit direction d) is answered with one network query at the
 point where it enters the field box [-domain, domain]^3: t = t_entry + phi(x_e, d),
 a hit when the visibility says so and the hit lies inside the box. Normals come
 from one backward pass, n = grad_x phi (paper Eqs. 3 and 7), signed so n.d < 0.
-The mesh is the level set of UDF(x) = min over K directions of phi(x, theta_k),
-taken only over directions whose visibility says hit (paper Eq. 5).
+The mesh (mesh_field "signed", the default) is the zero set of a signed field built from whole
+lines: through a grid node x and along direction theta the network, queried once at the line's box
+entry (as for a camera ray), says where the line first crosses the surface; x lies before that
+crossing (s >= 0, outside or occluded) or past it (s < 0). Near the surface the lines facing it agree,
+and a truncated mean over them (as in depth-map fusion) is the value (see line_vote); marching cubes
+runs on a coarse-to-fine narrow band (ddfbench.extract.banded_grid) whose fine nodes query only the
+mesh_keep lines their coarse parent found nearest the surface. mesh_field "udf" is the paper's
+UDF(x) = min over K directions of phi(x, theta_k), taken only over directions whose visibility says
+hit (paper Eq. 5), meshed as a thin shell.
 
 cfg keys (conf/model/ddf.yaml documents each):
   network   width, depth, activation (relu | softplus), weight_norm, dropout
@@ -16,9 +23,15 @@ cfg keys (conf/model/ddf.yaml documents each):
             (positional-encoding octaves; 0 = raw input)
   heads     visibility ("head": a logit trained with cross entropy | "clamp": no head,
             hit where the clamped distance stays below clamp_hit_ratio * delta, as in the paper)
-  loss      loss ("l1" | "clamp" with delta), vis_weight, batch_size, lr, weight_decay,
+  loss      loss ("l1" | "clamp" with delta), vis_weight, entry_share (share of each batch drawn
+            from line_entry_labels, visibility only, half hits and half misses; none unless the
+            samples give both), batch_size, lr, weight_decay,
             lr_schedule / lr_final_ratio / lr_warmup (ddfbench.train.Schedule), grad_clip
-  mesh      udf_directions (K), udf_rank (1 = the min; r = the r-th smallest, robust to
+  mesh      mesh_field ("signed" | "udf"); signed: mesh_directions (K on the coarsest lattice),
+            mesh_keep (lines per finer node), mesh_band (truncation, unit-cube units), mesh_rank
+            (order statistic of |s| used as the distance bound away from the surface), mesh_coarse
+            (stride of the first lattice), mesh_lipschitz (narrow-band bound);
+            udf: udf_directions (K), udf_rank (1 = the min; r = the r-th smallest, robust to
             a spurious hit), udf_level_steps (level in grid steps), udf_coarse,
             udf_lipschitz (narrow band, see ddfbench.extract.banded_grid), udf_project
             (move shell vertices onto the predicted surface along -normal)
@@ -43,14 +56,15 @@ from ddfbench.representation import Budget, FitData, FitStats, Hits, Probe, RayS
 from ddfbench.train import Schedule, seed_everything, train_loop
 
 DEFAULTS: dict[str, Any] = {
-    "width": 256, "depth": 4, "activation": "relu", "weight_norm": False, "dropout": 0.0,
+    "width": 128, "depth": 4, "activation": "relu", "weight_norm": False, "dropout": 0.0,
     "direction": "vector", "param": "ray", "pos_freqs": 8, "dir_freqs": 4,
     "visibility": "head", "loss": "l1", "delta": 1.0, "clamp_hit_ratio": 0.95, "vis_weight": 1.0,
-    "batch_size": 2048, "lr": 2e-3, "weight_decay": 0.0, "lr_schedule": "cosine", "lr_final_ratio": 0.01,
-    "lr_warmup": 0.0, "grad_clip": 1.0,
-    "mesh_field": "signed", "mesh_directions": 32, "mesh_keep": 8, "mesh_band": 0.03, "mesh_rank": 3, "mesh_coarse": 8, "mesh_lipschitz": 1.5,
+    "entry_share": 0.25, "batch_size": 2048, "lr": 3e-3, "weight_decay": 0.0, "lr_schedule": "cosine",
+    "lr_final_ratio": 0.01, "lr_warmup": 0.0, "grad_clip": 1.0,
+    "mesh_field": "signed", "mesh_directions": 32, "mesh_keep": 12, "mesh_band": 0.02, "mesh_rank": 3, "mesh_coarse": 8,
+    "mesh_lipschitz": 1.0,
     "udf_directions": 16, "udf_rank": 3, "udf_level_steps": 0.75, "udf_coarse": 4, "udf_lipschitz": 1.5, "udf_project": True,
-    "storage_dtype": "float32", "eval_batch": 65536,
+    "storage_dtype": "float32", "eval_batch": 65536, "min_hit_distance": 1e-3,
 }
 _CHOICES = {"activation": ("relu", "softplus"), "direction": ("vector", "angles"), "param": ("point", "ray"),
             "visibility": ("head", "clamp"), "loss": ("l1", "clamp"), "storage_dtype": ("float32", "float16"),
@@ -84,19 +98,41 @@ def line_vote(s: np.ndarray, keep: int, band: float, rank: int) -> tuple[np.ndar
     """Signed value (N,) from line distances s (N, J) (+inf: the line misses), and the column indices
     (N, keep) of the `keep` lines nearest zero.
 
-    Truncated mean, as in depth-map fusion: each line votes its distance clipped to +-band, lines
-    that crossed the surface more than `band` before the point (behind another part, or deep inside)
-    abstain; one extra vote of -band (a prior) makes a point with few votes inside. Near a surface the lines facing it agree
-    (s ~ +-distance / cos), so a few wrong lines are outvoted. Where the mean passes band / 2 the
-    value becomes the rank-th smallest |s| with its sign: a distance bound for the narrow band.
+    Truncated mean, as in depth-map fusion: each line votes its distance clipped to +-band (a miss
+    votes +band); lines that crossed the surface more than 2 band before the point (behind another
+    part, or deep inside) abstain, and one extra vote of -band (a prior) makes a point with few
+    votes inside. Near a surface the lines facing it agree (s ~ +-distance / cos), so a few wrong
+    lines are outvoted. Where the mean passes band / 2 the value becomes the rank-th smallest |s|
+    with the mean's sign: a distance bound for the narrow band.
     """
-    votes = np.abs(s) <= band
-    clipped = np.where(s > band, band, np.where(votes, s, 0.0))  # misses and far-ahead lines vote +band
-    mean = (clipped.sum(1) - band) / ((s > -band).sum(1) + 1)
-    size = np.partition(np.abs(s), min(int(rank), s.shape[1]) - 1, axis=1)[:, min(int(rank), s.shape[1]) - 1]
+    votes = s > -2 * band
+    clipped = np.where(votes, np.clip(s, -band, band), 0.0)  # misses and far-ahead lines vote +band
+    mean = (clipped.sum(1) - band) / (votes.sum(1) + 1)
+    r = min(int(rank), s.shape[1]) - 1
+    size = np.partition(np.abs(s), r, axis=1)[:, r]
     value = np.where(np.abs(mean) < band / 2, mean, np.sign(mean) * np.maximum(np.abs(mean), size))
     order = np.argsort(np.abs(s), axis=1, kind="stable")[:, : min(int(keep), s.shape[1])]
     return value.astype(np.float32), order
+
+
+def line_entry_labels(x: np.ndarray, d: np.ndarray, hit: np.ndarray, half: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Exact visibility labels where sample lines enter the box [-half, half]^3, the queries intersect
+    and to_mesh make. From rays x (N,3), unit d (N,3), hit (N,) bool:
+    a hit ray still hits from its line's entry (whatever lies between, the line meets the surface);
+    a point with misses along both d and -d (the surface sampler's perpendicular pairs) lies on a
+    line that misses entirely, so both its ends are misses.
+    Returns (entry points (M,3) float32, directions (M,3) float32, hit (M,) bool).
+    """
+    miss = np.flatnonzero(~hit)
+    flip = d[miss, 0] < 0  # one direction per line: the two rays of a pair share it
+    line = np.concatenate([x[miss], np.where(flip[:, None], -d[miss], d[miss])], 1).astype(np.float32)
+    _, inverse, count = np.unique(np.ascontiguousarray(line).view(np.dtype((np.void, 24))).ravel(),
+                                  return_inverse=True, return_counts=True)
+    pairs = miss[count[inverse.ravel()] == 2]
+    rows = np.r_[np.flatnonzero(hit), pairs]
+    xs, ds = np.asarray(x[rows], np.float32), np.asarray(d[rows], np.float32)
+    back = box_entry(xs, -ds, half)[1]
+    return xs - back[:, None] * ds, ds, np.asarray(hit[rows], bool)
 
 
 class PositionalEncoding(nn.Module):
@@ -162,6 +198,11 @@ def _resolved(cfg: Mapping[str, Any]) -> dict[str, Any]:
                 "mesh_keep", "mesh_rank", "mesh_coarse"):
         if int(out[key]) < 1:
             raise InputError(f"model.{key} {out[key]}: must be a positive integer")
+    if not 0.0 <= float(out["entry_share"]) < 1.0:
+        raise InputError(f"model.entry_share {out['entry_share']}: must be in [0, 1)")
+    for key in ("mesh_band", "mesh_lipschitz"):
+        if not float(out[key]) > 0:
+            raise InputError(f"model.{key} {out[key]}: must be > 0")
     if out["loss"] == "clamp" or out["visibility"] == "clamp":
         if not float(out["delta"]) > 0:
             raise InputError(f"model.delta {out['delta']}: must be > 0 for the clamp loss")
@@ -175,6 +216,7 @@ class DDF(Representation):
 
     family = "ddf"
     sample_kind = "rays"
+    needs_closed_surface = True  # surface sampling rejects inward rays by the odd-even rule; the mesh is a signed field
 
     def __init__(self, cfg: Mapping[str, Any], domain: float = 0.6):
         super().__init__(_resolved(cfg), domain)
@@ -243,7 +285,12 @@ class DDF(Representation):
         idx = np.flatnonzero(meets)
         x = o[idx] + t_entry[idx, None] * d[idx]
         dist, hit = self._forward_np(x, d[idx])
-        hit &= t_entry[idx] + dist <= t_exit[idx]
+        # a hit predicted closer than min_hit_distance (the renderer's secondary-ray offset; a learned
+        # field is no more precise than that near its surface) is the surface the ray starts on; camera
+        # rays start at the box entry, 0.1 from any shape, so they never meet this rule. A hit beyond
+        # the box exit is no hit.
+        min_hit = float(self.cfg["min_hit_distance"])
+        hit &= (t_entry[idx] + dist > min_hit) & (t_entry[idx] + dist <= t_exit[idx])
         rows = idx[hit]
         out.t[rows] = t_entry[rows] + dist[hit]
         out.hit[rows] = True
@@ -282,20 +329,15 @@ class DDF(Representation):
         dist, hit = self._forward_np(points - back[:, None] * directions, directions)
         return np.where(hit, dist - back, np.inf).astype(np.float32)
 
-    def signed_distance(self, points: np.ndarray, directions: np.ndarray) -> np.ndarray:
-        """Signed field (N,) from the line distances over unit directions (J, 3) (see line_vote, with
-        mesh_keep, mesh_band, mesh_rank). Zero on the predicted surface, negative past it."""
-        points, dirs = np.asarray(points, np.float32), np.asarray(directions, np.float32)
-        s = self.line_distance(np.repeat(points, len(dirs), axis=0), np.tile(dirs, (len(points), 1)))
-        return self._vote(s.reshape(len(points), len(dirs)))[0]
-
     def _vote(self, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """line_vote with this model's mesh_keep, mesh_band, mesh_rank."""
         c = self.cfg
         return line_vote(s, int(c["mesh_keep"]), float(c["mesh_band"]), int(c["mesh_rank"]))
 
     def _mesh_field(self, dirs: np.ndarray):
-        """The carry field of to_mesh: signed_distance over all directions on the first lattice; finer
-        nodes query only their parent's mesh_keep chosen directions (the lines that see the surface)."""
+        """The carry field of to_mesh (see extract.banded_grid): line_vote over all directions (K,3) on
+        the first lattice; finer nodes query only the mesh_keep lines their parent found nearest the
+        surface (state: their direction indices, (N, mesh_keep) int16)."""
 
         def field(points: np.ndarray, parent: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
             idx = np.broadcast_to(np.arange(len(dirs)), (len(points), len(dirs))) if parent is None else parent
@@ -356,11 +398,21 @@ class DDF(Representation):
         cfg, n = self.cfg, len(s)
         gen = torch.Generator(device=dev).manual_seed(int(budget.seed))
         delta = float(cfg["delta"])
+        xe, de, he = (torch.as_tensor(a, device=dev) for a in line_entry_labels(s.x, s.d, s.hit, self.domain))
+        n_hit_entries = int(he.sum())
+        both = 0 < n_hit_entries < len(he)  # one class alone would only bias the head: then none
+        n_entry = 2 * int(round(float(cfg["entry_share"]) * int(cfg["batch_size"]) / 2)) if both and cfg["visibility"] == "head" else 0
+        n_main = int(cfg["batch_size"]) - n_entry
+        order = torch.argsort((~he).to(torch.uint8), stable=True)  # entry hits first, then misses
+        xe, de, he = xe[order], de[order], he[order]
 
         def step_fn(step: int) -> torch.Tensor:
-            i = torch.randint(0, n, (int(cfg["batch_size"]),), device=dev, generator=gen)
-            pred, logit = self.net(x[i], d[i])
-            h = hit[i]
+            i = torch.randint(0, n, (n_main,), device=dev, generator=gen)
+            half = n_entry // 2  # as many entry hits as entry misses
+            j = torch.cat([torch.randint(0, max(n_hit_entries, 1), (half,), device=dev, generator=gen),
+                           torch.randint(n_hit_entries, max(len(he), n_hit_entries + 1), (half,), device=dev, generator=gen)])
+            pred, logit = self.net(torch.cat([x[i], xe[j]]), torch.cat([d[i], de[j]]))
+            pred, h = pred[:n_main], hit[i]
             if cfg["loss"] == "clamp":  # |clamp(y, delta) - clamp(y_hat, delta)|, misses labelled delta
                 target = torch.where(h, t[i].clamp(max=delta), delta)
                 dist_loss = (pred.clamp(max=delta) - target).abs()
@@ -369,7 +421,7 @@ class DDF(Representation):
                 dist_loss = (pred - t[i]).abs()[h].sum() / h.sum().clamp_min(1)
             if logit is None:
                 return dist_loss
-            vis = nn.functional.binary_cross_entropy_with_logits(logit, h.float())
+            vis = nn.functional.binary_cross_entropy_with_logits(logit, torch.cat([h, he[j]]).float())
             return dist_loss + float(cfg["vis_weight"]) * vis
 
         optimizer = torch.optim.Adam(self.net.parameters(), lr=float(cfg["lr"]), weight_decay=float(cfg["weight_decay"]))
