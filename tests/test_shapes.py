@@ -38,28 +38,21 @@ def test_unreadable_bytes(tmp_path):
     expect_error(p, "could not be parsed")
 
 
-def test_unsupported_format(tmp_path):
-    p = tmp_path / "mesh.xyzw"
-    p.write_text("1 2 3\n")
-    expect_error(p, "unsupported format")
+@pytest.mark.parametrize("name,text,fragment", [
+    ("mesh.xyzw", "1 2 3\n", "unsupported format"),
+    ("nan.obj", "v 0 0 0\nv 1 0 0\nv 0 nan 0\nv 0 0 inf\nf 1 2 3\nf 1 2 4\n", "NaN or inf"),
+    ("flat.obj", "v 0 0 0\nv 1 0 0\nv 2 0 0\nf 1 2 3\n", "zero area"),
+])
+def test_bad_text_files(tmp_path, name, text, fragment):
+    p = tmp_path / name
+    p.write_text(text)
+    expect_error(p, fragment)
 
 
 def test_point_cloud_has_no_faces(tmp_path):
     p = tmp_path / "cloud.ply"
     trimesh.PointCloud(np.random.default_rng(0).normal(size=(50, 3))).export(p)
     expect_error(p, "no faces")
-
-
-def test_nan_and_inf_vertices(tmp_path):
-    p = tmp_path / "nan.obj"
-    p.write_text("v 0 0 0\nv 1 0 0\nv 0 nan 0\nv 0 0 inf\nf 1 2 3\nf 1 2 4\n")
-    expect_error(p, "NaN or inf")
-
-
-def test_all_faces_zero_area(tmp_path):
-    p = tmp_path / "flat.obj"
-    p.write_text("v 0 0 0\nv 1 0 0\nv 2 0 0\nf 1 2 3\n")
-    expect_error(p, "zero area")
 
 
 def _write_obj(path, vertices, faces):
