@@ -126,6 +126,12 @@ class Representation(abc.ABC):
     def load(cls, path: str, domain: float = 0.6) -> "Representation":
         """Read an artifact written by save (models: torch.load(weights_only=True))."""
 
+    def _publish(self, tmp: str, path: str) -> str:
+        """Finish a save: rename the fully written temporary file onto path and remember it."""
+        os.replace(tmp, path)
+        self._saved_path = path
+        return path
+
     def n_params(self) -> int:
         """Number of stored scalars (network parameters, grid cells, vertex coordinates...)."""
         return 0

@@ -8,10 +8,10 @@ from typing import Any
 
 from omegaconf import OmegaConf
 
+from ddfbench import CONF_DIR
 from ddfbench.oracle import Oracle
 from ddfbench.shapes import Shape, load_shape
 
-CONF_DIR = os.path.join(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))), "conf")
 DOMAIN = 0.6  # conf/config.yaml `domain`: half-side of the field box
 
 

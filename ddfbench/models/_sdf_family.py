@@ -106,9 +106,7 @@ class NetSDFFamily(SDFFamily):
         state = {k: v.detach().cpu() for k, v in self.net.state_dict().items()}
         tmp = f"{path}.tmp{os.getpid()}"
         torch.save({"header": json.dumps(header), "state_dict": state}, tmp)
-        os.replace(tmp, path)
-        self._saved_path = path
-        return path
+        return self._publish(tmp, path)
 
     @classmethod
     def load(cls, path: str, domain: float = 0.6) -> "NetSDFFamily":

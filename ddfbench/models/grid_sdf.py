@@ -98,9 +98,7 @@ class GridSDF(SDFFamily):
                   "build": self.build, "trace": dict(self.cfg.get("trace") or {})}
         tmp = f"{path}.tmp{os.getpid()}.npz"
         np.savez(tmp, sdf=self.grid, header=np.array(json.dumps(header)))
-        os.replace(tmp, path)
-        self._saved_path = path
-        return path
+        return self._publish(tmp, path)
 
     @classmethod
     def load(cls, path: str, domain: float = 0.6) -> "GridSDF":

@@ -6,17 +6,15 @@ import torch
 
 from ddfbench.hard_shapes import HARD
 from ddfbench.models import available_families
-from ddfbench.shapes import Shape, load_shape, normalize, validate
+from ddfbench.shapes import Shape, load_shape
 
 torch.set_num_threads(1)
 
 
 def hard_shape(name: str, **params) -> Shape:
     """A `hard/...` catalog shape, validated and normalized exactly as shapes.load_shape does for any mesh."""
-    mesh, warnings = validate(HARD[name](**params), f"shape {name}")
-    mesh, transform = normalize(mesh)
-    return Shape(mesh=mesh, name=name, source="procedural", transform=transform,
-                 watertight=bool(mesh.is_watertight), warnings=warnings)
+    assert name in HARD, name
+    return load_shape({"name": name, "params": params})
 
 
 def unit(v: np.ndarray) -> np.ndarray:
@@ -32,11 +30,6 @@ def has_family(name: str) -> bool:
 @pytest.fixture(scope="session")
 def cube():
     return load_shape({"name": "cube"})
-
-
-@pytest.fixture(scope="session")
-def sphere():
-    return load_shape({"name": "sphere"})
 
 
 def ray_backends(mesh):
