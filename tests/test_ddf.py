@@ -9,6 +9,7 @@ import trimesh
 from omegaconf import OmegaConf
 
 from ddfbench.errors import InputError
+from ddfbench.models import ddf as ddf_module
 from ddfbench.models import load_family
 from ddfbench.models.ddf import DDF, box_entry, fibonacci_directions, line_entry_labels, line_vote
 from ddfbench.oracle import Oracle
@@ -172,8 +173,22 @@ def test_normals_are_unit_finite_and_match_the_mesh(fitted, sphere_oracle):
     both = hits.hit & (tri >= 0)
     cos = np.einsum("ij,ij->i", hits.normal[both], gt_normal[both])
     assert np.median(np.degrees(np.arccos(np.clip(cos, -1, 1)))) < 8
-    assert hits.stats["field_evals"] == 5000 and hits.stats["backward_passes"] == int(hits.hit.sum())
-    assert rep.intersect(o, d, normals=False).stats["backward_passes"] == 0
+    assert rep.intersect(o, d, normals=False).stats == {"field_evals": 5000, "backward_passes": 0}
+
+
+def test_one_pass_and_two_pass_normals_agree_and_count_their_work(fitted, monkeypatch):
+    """A chunk with many hits is differentiated whole (one pass); one with few hits re-runs its hits."""
+    rep, _ = fitted
+    o, d = camera_rays(5000, 2)
+    monkeypatch.setattr(ddf_module, "ONE_PASS_HIT_SHARE", 0.0)
+    one = rep.intersect(o, d, normals=True)
+    monkeypatch.setattr(ddf_module, "ONE_PASS_HIT_SHARE", 1.01)
+    two = rep.intersect(o, d, normals=True)
+    k = int(one.hit.sum())
+    assert 0 < k < 5000 and np.array_equal(one.hit, two.hit) and np.array_equal(one.t, two.t)
+    assert np.allclose(one.normal, two.normal, atol=1e-5) and np.array_equal(one.normal_valid, two.normal_valid)
+    assert one.stats == {"field_evals": 5000, "backward_passes": 5000}
+    assert two.stats == {"field_evals": 5000 + k, "backward_passes": k}
 
 
 def test_normals_where_the_gradient_vanishes_are_flagged():

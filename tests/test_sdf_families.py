@@ -264,21 +264,28 @@ def test_gan_sdf_architecture_matches_the_thesis():
 
 
 def test_gan_sdf_seed_sweep_reports_its_failure_rate(sphere, tmp_path):
-    """Several seeds of the thesis loss plus the L1 anchor on the sphere; failures are counted, not hidden."""
+    """Several seeds of the thesis loss plus the L1 anchor on the sphere; failures are counted, not hidden.
+
+    A seed fails unless, within 0.3 of the sphere, the field's sign is right at >= 90 % of the points
+    farther than 0.02 from it and its mean error is below half an untrained generator's. Measured when
+    this test was written (200 steps, 4 seeds): anchored 0.038-0.068 error, 93-99.9 % signs, no
+    failure; the thesis loss alone failed 3 of 4 (signs 49-90 %).
+    """
     mesh, oracle, samples = sphere
-    p = near_points(1000)
+    p = near_points(2000, band=0.3)
     ref = np.linalg.norm(p, axis=1) - RADIUS
+    far = np.abs(ref) > 0.02
     start = np.abs(load_family("gan_sdf")({}).sdf(p) - ref).mean()
-    errors, failed = [], 0
+    scores, failed = [], 0
     for seed in range(3):
         rep = load_family("gan_sdf")({**GAN_FAST, "w_anchor": 1.0}, DOMAIN)
-        stats = rep.fit(FitData(samples, mesh, oracle), Budget(max_steps=60, max_seconds=60, seed=seed))
-        err = float(np.abs(rep.sdf(p) - ref).mean()) if stats.status == "ok" else float("inf")
-        errors.append(err)
-        failed += int(stats.status != "ok" or err > 0.05)
-    print(f"\ngan_sdf sphere sweep: near-surface mean error per seed {errors}, failure rate {failed}/3")
-    assert failed <= 1, f"gan_sdf failed on {failed} of 3 seeds: {errors}"
-    assert min(errors) < 0.6 * start  # it learns (60 small steps: far from converged)
+        stats = rep.fit(FitData(samples, mesh, oracle), Budget(max_steps=200, max_seconds=120, seed=seed))
+        s = rep.sdf(p)
+        err, signs = float(np.abs(s - ref).mean()), float((np.sign(s[far]) == np.sign(ref[far])).mean())
+        scores.append((round(err, 4), round(signs, 3)))
+        failed += int(stats.status != "ok" or signs < 0.9 or err > 0.5 * start)
+    print(f"\ngan_sdf sphere sweep: (mean error, sign agreement) per seed {scores}, failure rate {failed}/3")
+    assert failed == 0, f"gan_sdf failed on {failed} of 3 seeds: {scores} (untrained error {start:.3f})"
     check_round_trip(rep, tmp_path, "gan_sdf")
 
 
