@@ -19,11 +19,19 @@ from scipy.spatial import cKDTree
 PENALTY_DISTANCE = float(2 * 0.6 * np.sqrt(3.0))
 
 
+def kd_tree(points: np.ndarray) -> cKDTree:
+    """A KD-tree over points (N,3), in float64; build once, query with nearest_in."""
+    return cKDTree(np.asarray(points, np.float64))
+
+
+def nearest_in(tree: cKDTree, a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """For each point of a (N,3): unsigned distance (N,) float64 to the nearest point in tree and its index."""
+    return tree.query(np.asarray(a, np.float64), k=1, workers=-1)
+
+
 def nearest_distance(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """For each point of a (N,3): unsigned distance (N,) float64 to the nearest point of b (M,3) and its index."""
-    tree = cKDTree(np.asarray(b, np.float64))
-    dist, idx = tree.query(np.asarray(a, np.float64), k=1, workers=-1)
-    return dist, idx
+    return nearest_in(kd_tree(b), a)
 
 
 def _empty(*clouds: np.ndarray) -> bool:
@@ -93,10 +101,13 @@ def sample_surface(mesh: trimesh.Trimesh, n: int, seed: int) -> tuple[np.ndarray
 
 def normal_consistency(a: np.ndarray, na: np.ndarray, b: np.ndarray, nb: np.ndarray) -> float:
     """Mean |cos| between each point's normal and its nearest neighbour's normal in the other set, both ways."""
-    _, ia = nearest_distance(a, b)
-    _, ib = nearest_distance(b, a)
-    ab = np.abs(np.einsum("ij,ij->i", na, nb[ia]))
-    ba = np.abs(np.einsum("ij,ij->i", nb, na[ib]))
+    return matched_normal_consistency(na, nb, nearest_distance(a, b)[1], nearest_distance(b, a)[1])
+
+
+def matched_normal_consistency(na: np.ndarray, nb: np.ndarray, a_to_b: np.ndarray, b_to_a: np.ndarray) -> float:
+    """normal_consistency from the nearest-neighbour indices already found: a_to_b (N,) into b, b_to_a (M,) into a."""
+    ab = np.abs(np.einsum("ij,ij->i", na, nb[a_to_b]))
+    ba = np.abs(np.einsum("ij,ij->i", nb, na[b_to_a]))
     return float(0.5 * (ab.mean() + ba.mean()))
 
 
@@ -114,8 +125,11 @@ def cloud_metrics(gt: np.ndarray, rec: np.ndarray, radii: Sequence[float]) -> di
     """Chamfer L2/L1, f-score per radius and sided distances between two point clouds (penalty if one is empty)."""
     if _empty(gt, rec):
         return penalty_metrics(radii)
-    d_gr, _ = nearest_distance(gt, rec)
-    d_rg, _ = nearest_distance(rec, gt)
+    return distance_metrics(nearest_distance(gt, rec)[0], nearest_distance(rec, gt)[0], radii)
+
+
+def distance_metrics(d_gr: np.ndarray, d_rg: np.ndarray, radii: Sequence[float]) -> dict[str, Any]:
+    """cloud_metrics from nearest distances already found: GT points to rec d_gr (N,), rec points to GT d_rg (M,)."""
     out: dict[str, Any] = {
         "chamfer_l2": float((d_gr**2).mean() + (d_rg**2).mean()),
         "chamfer_l1": float(0.5 * (d_gr.mean() + d_rg.mean())),
@@ -159,13 +173,16 @@ def geometry_metrics(
     noise_floor: the same metrics of GT against an independent resample of GT (the metric's floor).
     """
     gt_pts, gt_n = sample_surface(gt, n_points, seed)
+    gt_tree = kd_tree(gt_pts)  # each cloud's tree is built once and serves every metric
     empty = rec is None or len(rec.faces) == 0 or not np.isfinite(rec.vertices).all() or rec.area <= 0
     if empty:
         out = penalty_metrics(radii)
     else:
         rec_pts, rec_n = sample_surface(rec, n_points, seed + 1)
-        out = cloud_metrics(gt_pts, rec_pts, radii)
-        out["normal_consistency"] = normal_consistency(gt_pts, gt_n, rec_pts, rec_n)
+        d_gr, i_gr = nearest_in(kd_tree(rec_pts), gt_pts)
+        d_rg, i_rg = nearest_in(gt_tree, rec_pts)
+        out = distance_metrics(d_gr, d_rg, radii)
+        out["normal_consistency"] = matched_normal_consistency(gt_n, rec_n, i_gr, i_rg)
         out["empty_reconstruction"] = False
         if with_point_to_surface:
             to_rec = point_to_surface(gt_pts, rec)
@@ -174,7 +191,7 @@ def geometry_metrics(
             out["p2s_chamfer_l1"] = float(0.5 * (to_rec.mean() + to_gt.mean()))
     if noise_floor:
         resample, _ = sample_surface(gt, n_points, seed + 2)
-        floor = cloud_metrics(gt_pts, resample, radii)
+        floor = distance_metrics(nearest_distance(gt_pts, resample)[0], nearest_in(gt_tree, resample)[0], radii)
         out["noise_floor"] = {"chamfer_l2": floor["chamfer_l2"], "chamfer_l1": floor["chamfer_l1"],
                               "fscore": floor["fscore"]}
     out["n_points"] = int(n_points)

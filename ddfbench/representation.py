@@ -104,6 +104,8 @@ class Representation(abc.ABC):
         self.cfg = dict(cfg)
         self.domain = float(domain)
         self._saved_path: str | None = None
+        # what the last to_mesh reported (ddfbench.extract info: field_evals, capped, empty, ...); {} if nothing
+        self.extract_info: dict[str, Any] = {}
 
     @abc.abstractmethod
     def fit(self, data: "FitData", budget: Budget, probe: Probe | None = None) -> FitStats:
@@ -115,7 +117,8 @@ class Representation(abc.ABC):
 
     @abc.abstractmethod
     def to_mesh(self, resolution: int) -> trimesh.Trimesh:
-        """A triangle mesh of the surface (possibly empty: zero faces), for geometry metrics."""
+        """A triangle mesh of the surface (possibly empty: zero faces), for geometry metrics; a field
+        extraction leaves its info in self.extract_info."""
 
     @abc.abstractmethod
     def save(self, path: str) -> str:

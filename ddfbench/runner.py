@@ -100,6 +100,10 @@ def _stages(cfg: Mapping[str, Any], rdir: str, device: str, seed: int, out: dict
     t0 = time.perf_counter()
     rec = rep.to_mesh(int(ev["mesh_resolution"]))
     cost["extract_s"] = time.perf_counter() - t0
+    if rep.extract_info.get("field_evals") is not None:
+        cost["extract_field_evals"] = int(rep.extract_info["field_evals"])
+    if rep.extract_info.get("capped"):
+        out["flags"].append("extraction_capped")
     if len(rec.faces):
         rec.export(os.path.join(rdir, "reconstruction.ply"), file_type="ply", encoding="binary")
         artifacts["reconstruction"] = "reconstruction.ply"

@@ -5,6 +5,7 @@ import pytest
 import torch
 
 from ddfbench.errors import InputError
+from ddfbench import extract
 from ddfbench.extract import banded_grid, field_to_mesh, grid_points, sdf_to_mesh, udf_to_mesh
 
 R0 = 0.4
@@ -49,9 +50,9 @@ def crossing_nodes(values, level=0.0):
 
 @pytest.mark.parametrize("coarse", [4, 8])
 def test_narrow_band_matches_dense_grid_and_evaluates_less(coarse):
-    dense, n_dense = banded_grid(sphere_sdf, 65, 0.6, 0.0, coarse=1)
-    band, n_band = banded_grid(sphere_sdf, 65, 0.6, 0.0, coarse=coarse)
-    assert n_band < n_dense / 5
+    dense, n_dense, _ = banded_grid(sphere_sdf, 65, 0.6, 0.0, coarse=1)
+    band, n_band, capped = banded_grid(sphere_sdf, 65, 0.6, 0.0, coarse=coarse)
+    assert n_band < n_dense / 5 and not capped
     assert np.array_equal(np.sign(band), np.sign(dense))
     ends = crossing_nodes(dense)
     assert ends.sum() > 1000 and np.array_equal(band[ends], dense[ends])
@@ -63,8 +64,8 @@ def test_narrow_band_matches_dense_grid_and_evaluates_less(coarse):
 def test_narrow_band_finds_a_feature_thinner_than_the_coarse_lattice():
     """A plate 0.03 thick (a quarter of the first lattice's spacing) between coarse nodes."""
     plate = lambda p: np.abs(p[:, 2] - 0.013) - 0.015  # noqa: E731 (exact distance, Lipschitz 1)
-    dense, _ = banded_grid(plate, 97, 0.6, 0.0, coarse=1)
-    band, _ = banded_grid(plate, 97, 0.6, 0.0, coarse=8)
+    dense, _, _ = banded_grid(plate, 97, 0.6, 0.0, coarse=1)
+    band, _, _ = banded_grid(plate, 97, 0.6, 0.0, coarse=8)
     assert (dense < 0).any() and np.array_equal(np.sign(band), np.sign(dense))
 
 
@@ -81,9 +82,9 @@ def test_carry_hands_each_node_the_state_of_a_coarse_node_near_it():
         assert (np.abs(p - parent) <= 3 * step + 1e-6).all()
         return sphere_sdf(p), parent
 
-    values, _ = banded_grid(field, 33, 0.6, 0.0, coarse=4, carry=True)
+    values, _, _ = banded_grid(field, 33, 0.6, 0.0, coarse=4, carry=True)
     assert calls[0] and not all(calls[1:]) and len(calls) > 1
-    plain, _ = banded_grid(sphere_sdf, 33, 0.6, 0.0, coarse=4)
+    plain, _, _ = banded_grid(sphere_sdf, 33, 0.6, 0.0, coarse=4)
     assert np.array_equal(values, plain)
 
 
@@ -148,3 +149,16 @@ def test_bad_arguments_raise_input_errors():
         grid_points(1, 0.6)
     with pytest.raises(InputError):
         field_to_mesh(np.zeros((4, 4, 5)), 0.6, 0.0)
+
+
+def test_a_band_that_would_cover_the_grid_is_capped_and_flagged():
+    """A field near its level everywhere (an untrained net) must not cost a dense grid."""
+    flat = lambda p: np.full(len(p), 0.02, np.float32) + 0.001 * p[:, 0]  # noqa: E731 - |slope| << band
+    values, evals, capped = banded_grid(flat, 65, 0.6, 0.0, coarse=4, max_slices=5)
+    first = 17**3  # the coarse lattice: every 4th node of 65
+    assert capped and first <= evals <= first + 5 * 65**2
+    assert np.isfinite(values).all()
+    mesh, info = udf_to_mesh(flat, 65, 0.6, 0.0205, coarse=4)
+    assert info["capped"] and info["field_evals"] <= first + extract.MAX_BAND_SLICES * 65**2 < 65**3 / 2
+    _, sphere_info = udf_to_mesh(lambda p: np.abs(sphere_sdf(p)), 65, 0.6, 0.01, coarse=4)
+    assert not sphere_info["capped"]

@@ -70,3 +70,18 @@ def test_empty_reconstruction_gets_penalty_not_exception():
     assert m["empty_reconstruction"] is True
     assert m["fscore"]["0.01"] == 0.0
     assert np.isfinite(m["chamfer_l2"]) and m["chamfer_l2"] >= metrics.PENALTY_DISTANCE**2
+
+
+def test_geometry_metrics_equal_the_metrics_on_its_own_samples():
+    """geometry_metrics shares KD-trees between metrics; each value must equal the standalone metric."""
+    gt, rec = trimesh.creation.icosphere(3, 0.5), trimesh.creation.box(extents=(0.8, 0.9, 1.0))
+    m = metrics.geometry_metrics(gt, rec, 3000, [0.01, 0.05], seed=4, with_point_to_surface=False)
+    g, gn = metrics.sample_surface(gt, 3000, 4)
+    r, rn = metrics.sample_surface(rec, 3000, 5)
+    floor = metrics.sample_surface(gt, 3000, 6)[0]
+    assert np.isclose(m["chamfer_l2"], brute_sq(g, r).mean() + brute_sq(r, g).mean())
+    assert np.isclose(m["chamfer_l1"], metrics.chamfer_l1(g, r))
+    assert all(np.isclose(m["fscore"][str(t)], metrics.f_score(g, r, t)) for t in (0.01, 0.05))
+    assert np.isclose(m["sided_rec_to_gt"]["mean"], brute_sq(r, g).mean())
+    assert np.isclose(m["normal_consistency"], metrics.normal_consistency(g, gn, r, rn))
+    assert np.isclose(m["noise_floor"]["chamfer_l2"], brute_sq(g, floor).mean() + brute_sq(floor, g).mean())

@@ -233,7 +233,7 @@ def test_neural_sdf_nan_guard_fires_on_divergence(sphere):
     o, d, _, _ = rays_at_sphere(50)
     hits = rep.intersect(o, d)
     assert not hits.hit.any() and (hits.status != RayStatus.HIT).all()
-    assert len(rep.to_mesh(16).faces) == 0 and rep.last_mesh_info["empty"]
+    assert len(rep.to_mesh(16).faces) == 0 and rep.extract_info["empty"]
 
 
 def test_neural_sdf_needs_sdf_samples(sphere):

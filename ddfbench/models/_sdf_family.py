@@ -36,7 +36,6 @@ class SDFFamily(Representation):
         super().__init__(cfg, domain)
         self.trace_options = TraceOptions.from_cfg(self.cfg)
         self.device = "cpu"
-        self.last_mesh_info: dict[str, Any] = {}
 
     @abc.abstractmethod
     def field(self, points: torch.Tensor) -> torch.Tensor:
@@ -71,12 +70,12 @@ class SDFFamily(Representation):
         return to_hits(result, directions, nrm.detach().cpu().numpy(), valid.cpu().numpy(), evals, backward)
 
     def to_mesh(self, resolution: int) -> trimesh.Trimesh:
-        """Marching cubes of the field on a resolution^3 grid over the domain box (empty mesh flagged in last_mesh_info).
+        """Marching cubes of the field on a resolution^3 grid over the domain box (empty mesh flagged in extract_info).
 
         cfg.extract_coarse > 1 evaluates coarse to fine, only near the surface, assuming the field's slope
         is at most cfg.extract_lipschitz there (extract.banded_grid); 1 evaluates every node.
         """
-        mesh, self.last_mesh_info = extract.sdf_to_mesh(
+        mesh, self.extract_info = extract.sdf_to_mesh(
             self.sdf, int(resolution), self.domain, coarse=int(self.cfg.get("extract_coarse", 1)),
             lipschitz=float(self.cfg.get("extract_lipschitz", 1.0)))
         return mesh

@@ -240,7 +240,6 @@ class DDF(Representation):
         self.device = "cpu"
         self.net = DDFNet(self.cfg)
         self.net.eval()
-        self.extract_info: dict[str, Any] | None = None  # the last to_mesh's extraction info
 
     # ---- queries --------------------------------------------------------------------------------
     def _forward_np(self, x: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
