@@ -52,6 +52,22 @@ class Oracle:
         Returns t (N,) float32 (inf on a miss), triangle id (N,) int64 (-1 on a miss) and the
         geometric face normal (N,3) float32 oriented against the ray (zeros on a miss).
         """
+        directions = _f32(directions).reshape(-1, 3)
+        t, tri = self._cast(origins, directions)
+        normal = np.zeros((len(t), 3), np.float32)
+        hit = tri >= 0
+        fn = self._face_normals[tri[hit]]
+        flip = np.einsum("ij,ij->i", fn, directions[hit]) > 0
+        fn[flip] *= -1
+        normal[hit] = fn
+        return t, tri, normal
+
+    def hit_distance(self, origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
+        """t (N,) float32 of the first hit of rays (N,3),(N,3) (inf on a miss): first_hit without the normals."""
+        return self._cast(origins, directions)[0]
+
+    def _cast(self, origins: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(t (N,) float32, triangle id (N,) int64) of the first hits; inf and -1 on a miss."""
         origins, directions = _f32(origins).reshape(-1, 3), _f32(directions).reshape(-1, 3)
         n = len(origins)
         t = np.full(n, np.inf, np.float32)
@@ -71,13 +87,7 @@ class Oracle:
                 rays = idx_ray + s
                 t[rays] = np.einsum("ij,ij->i", loc - origins[rays], directions[rays])
                 tri[rays] = idx_tri
-        normal = np.zeros((n, 3), np.float32)
-        hit = tri >= 0
-        fn = self._face_normals[tri[hit]]
-        flip = np.einsum("ij,ij->i", fn, directions[hit]) > 0
-        fn[flip] *= -1
-        normal[hit] = fn
-        return t, tri, normal
+        return t, tri
 
     def count_crossings(self, origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
         """Number of surface crossings along each ray (N,) int64.

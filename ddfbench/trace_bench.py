@@ -87,7 +87,7 @@ def bench_trace(shape_name: str, size: int, train_seconds: float, model_path: st
         print(f"neural_sdf: {rep.n_params()} params, {stats.steps} steps in {stats.seconds:.0f}s, status {stats.status}")
     o, d = pinhole_rays(size)
     n = len(o)
-    gt_t, _, _ = oracle.first_hit(o, d)
+    gt_t = oracle.hit_distance(o, d)
     rows = []
     for name, run in (
         ("tracer omega=1.0", lambda: sphere_trace(rep.field, o, d, rep.domain, TraceOptions(omega=1.0))),

@@ -12,6 +12,8 @@ def test_backends_agree_on_random_rays(bunny, rng):
     o, d = random_rays(rng, 20000)
     t1, tri1, n1 = Oracle(bunny.mesh, "open3d").first_hit(o, d)
     t2, tri2, n2 = Oracle(bunny.mesh, "embree").first_hit(o, d)
+    assert np.array_equal(Oracle(bunny.mesh, "open3d").hit_distance(o, d), t1)
+    assert np.array_equal(Oracle(bunny.mesh, "embree").hit_distance(o, d), t2)
     hit1, hit2 = np.isfinite(t1), np.isfinite(t2)
     assert hit1.mean() > 0.1
     assert (hit1 != hit2).mean() < 1e-3

@@ -61,7 +61,7 @@ def run(ctx: Context) -> SectionResult:
         rep, info = build(ctx)
         o, d = pinhole_rays(int(px))
         n = len(o)
-        gt_hit = np.isfinite(oracle.first_hit(o, d)[0])
+        gt_hit = np.isfinite(oracle.hit_distance(o, d))
         for prec in (p for p in precs if p != "bf16"):  # the hit tolerance (1e-5) is below bf16's resolution
             kw = dict(device=ctx.device, precision=prec)
             traced, tracer_t = measure(lambda: sphere_trace(rep.field, o, d, rep.domain, rep.trace_options, ctx.device),

@@ -93,7 +93,7 @@ def sample(shape: Shape, oracle: Oracle, cfg: Mapping[str, Any], kind: str,
             pts = (np.repeat(x, per_ray, axis=0) + along.reshape(-1, 1) * np.repeat(d, per_ray, axis=0)).astype(np.float32)
             out.add(pts, sdf=oracle.signed_distance(pts))
             continue
-        t0, _, _ = oracle.first_hit(x, d)
+        t0 = oracle.hit_distance(x, d)
         if p["s_p"] == 0:
             out.add(x, d, t0)
             continue
@@ -103,6 +103,6 @@ def sample(shape: Shape, oracle: Oracle, cfg: Mapping[str, Any], kind: str,
         rejected["too_short"] = rejected.get("too_short", 0) + int((~ok).sum())
         r, k = np.nonzero(ok)
         pts = (x[r] + (end[r] - back[r, k])[:, None] * d[r]).astype(np.float32)
-        out.add(pts, d[r], oracle.first_hit(pts, d[r])[0])
+        out.add(pts, d[r], oracle.hit_distance(pts, d[r]))
     info = dict(p, n_cameras=int(len(centers)), pixel_rays=int(len(origins)))
     return out.samples(), info, rejected

@@ -38,5 +38,5 @@ def sample(shape: Shape, oracle: Oracle, cfg: Mapping[str, Any], kind: str,
             out.add(x, sdf=oracle.signed_distance(x))
         else:
             d = uniform_directions(rng, len(x))
-            out.add(x, d, oracle.first_hit(x, d)[0])
+            out.add(x, d, oracle.hit_distance(x, d))
     return out.samples(), p, {}

@@ -111,7 +111,7 @@ def _marching_rays(pts, normals, p, oracle, rng, out: Collector, rejected, done:
     inside = crossings % 2 == 1
     reenters = (crossings > 0) & ~inside  # outward rays that hit another part
     t_esc = np.full(len(base), np.inf)
-    t_esc[reenters] = oracle.first_hit(origin[reenters], theta[reenters])[0].astype(np.float64) + OFFSET
+    t_esc[reenters] = oracle.hit_distance(origin[reenters], theta[reenters]).astype(np.float64) + OFFSET
 
     t_enter, t_exit = box_interval(base, theta, -p["box"], p["box"])
     t = marching_distances(p["steps"], s_p, p["t_min"], t_exit, rng)  # (R, s_p)
@@ -127,7 +127,7 @@ def _marching_rays(pts, normals, p, oracle, rng, out: Collector, rejected, done:
     # one backward cast per ray from its farthest kept sample checks the whole kept segment
     rays = np.flatnonzero(keep.any(axis=1))
     t_far = np.where(keep[rays], t[rays], -np.inf).max(axis=1)
-    t_back, _, _ = oracle.first_hit(base[rays] + t_far[:, None] * theta[rays], -theta[rays])
+    t_back = oracle.hit_distance(base[rays] + t_far[:, None] * theta[rays], -theta[rays])
     bad = rays[~(np.abs(t_back - t_far) <= TOL)]
     _count(rejected, "verify", keep[bad].sum())
     keep[bad] = False
