@@ -13,6 +13,7 @@ from ddfbench import levelset
 from ddfbench.errors import InputError
 from ddfbench.extract import grid_points
 from ddfbench.models import load_family
+from ddfbench.models.neural_sdf import clamped_l1
 from ddfbench.oracle import Oracle
 from ddfbench.representation import Budget, FitData, RayStatus
 from ddfbench.shapes import load_shape
@@ -224,9 +225,20 @@ def test_neural_sdf_fits_the_sphere(sphere, tmp_path):
     check_round_trip(rep, tmp_path, "neural_sdf")
 
 
+def test_clamped_l1_is_deepsdf_in_the_band_and_pulls_back_an_overshoot():
+    delta = 0.1
+    target = torch.tensor([0.05, 0.05, 0.3, 0.3, -0.02])
+    pred = torch.tensor([0.02, 0.7, 0.5, -0.4, 0.2], requires_grad=True)
+    per_point = [float(clamped_l1(pred[i : i + 1], target[i : i + 1], delta)) for i in range(5)]
+    # in the band: DeepSDF's |f - s|; past the target's own bound: 0; past the band elsewhere: |f - clamp(s)|
+    assert np.allclose(per_point, [0.03, 0.65, 0.0, 0.5, 0.22])
+    (grad,) = torch.autograd.grad(clamped_l1(pred, target, delta), pred)
+    assert grad[1] > 0 and grad[2] == 0 and grad[3] < 0 and grad[4] > 0  # DeepSDF's is 0 at 1, 3 and 4
+
+
 def test_neural_sdf_nan_guard_fires_on_divergence(sphere):
     mesh, oracle, samples = sphere
-    rep = load_family("neural_sdf")({**SMALL_NET, "lr": 1e12, "activation": "relu"}, DOMAIN)
+    rep = load_family("neural_sdf")({**SMALL_NET, "lr": 1e30, "activation": "relu"}, DOMAIN)
     stats = rep.fit(FitData(samples, mesh, oracle), Budget(max_steps=200, max_seconds=30))
     assert stats.status == "failed" and "non-finite" in stats.message
     # a failed model still answers without raising: no hit is invented, the mesh is flagged empty

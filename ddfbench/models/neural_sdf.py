@@ -9,7 +9,8 @@ a slope of about 0.5-1 and an offset of a few hundredths); the first layer's wei
 sin/cos features start at zero so the embedding does not break that.
 
 Losses on a batch of SDF samples (x, s) (sample_kind "sdf"):
-  w_sdf      * mean |clamp(f(x), -delta, delta) - clamp(s, -delta, delta)|   (DeepSDF, delta 0.1)
+  w_sdf      * mean |clamp(f(x), -delta, delta) - clamp(s, -delta, delta)|   (DeepSDF, delta 0.1;
+               see clamped_l1 for where its gradient would vanish)
   w_surface  * mean |f(x)| over the batch's samples with |s| <= surface_tol
   w_eikonal  * mean | ||grad f(y)|| - 1 |, y = the batch points and as many uniform box points
 Normals of hits: autograd, one batched backward pass (counted per point).
@@ -90,8 +91,14 @@ def eikonal_residual(net: nn.Module, points: torch.Tensor) -> torch.Tensor:
 
 
 def clamped_l1(pred: torch.Tensor, target: torch.Tensor, delta: float) -> torch.Tensor:
-    """DeepSDF loss: mean |clamp(pred, -delta, delta) - clamp(target, -delta, delta)|."""
-    return (pred.clamp(-delta, delta) - target.clamp(-delta, delta)).abs().mean()
+    """DeepSDF's clamped L1, mean |clamp(pred) - clamp(target)| (clamp to [-delta, delta]), without its
+    dead zone: where pred has left the band and its clamp is not the target's, the term is
+    |pred - clamp(target)|, which pulls pred back (DeepSDF's term is constant there, so one overshoot
+    of every prediction past delta, as a first Adam step did on the airplane, stopped training for good).
+    Where pred lies in the band, or past the same bound as the target, the value is DeepSDF's."""
+    t, p = target.clamp(-delta, delta), pred.clamp(-delta, delta)
+    dead = (p != pred) & (p != t)
+    return torch.where(dead, (pred - t).abs(), (p - t).abs()).mean()
 
 
 class NeuralSDF(NetSDFFamily):
