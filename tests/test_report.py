@@ -87,6 +87,20 @@ def test_seeds_pool_into_mean_std_with_n():
     assert set(row["keys"].split()) == {r["key"] for r in recs[:3]}
 
 
+def test_rows_follow_the_sweep_by_model_then_shape_even_within_one_second():
+    """Start times have 1 s resolution: runs of one second must still group by model, then shape."""
+    order = [("lod10k", "bunny", "08:12:12"), ("lod10k", "airplane", "08:12:13"), ("lod2k", "bunny", "08:12:13"),
+             ("lod10k", "cow", "08:12:13"), ("lod2k", "airplane", "08:12:14"), ("lod2k", "cow", "08:12:14")]
+    recs = []
+    for model, shape, t in order:
+        recs.append(make_record(model=model, shape=shape))
+        recs[-1]["started"] = f"2026-11-21T{t}+00:00"
+    df = tables.summarize(recs)
+    assert list(zip(df["model"], df["shape"])) == [
+        ("lod10k", "bunny"), ("lod10k", "airplane"), ("lod10k", "cow"),
+        ("lod2k", "bunny"), ("lod2k", "airplane"), ("lod2k", "cow")]
+
+
 def test_failed_and_missing_seeds_are_flagged_not_hidden():
     recs = [make_record(seed=s) for s in (0, 1, 2)]
     recs += [make_record(width=128, seed=0), make_record(width=128, seed=1, status="failed")]

@@ -139,8 +139,19 @@ def summarize(records: Iterable[dict[str, Any]]) -> pd.DataFrame:
         ident = (r["model"], r["shape"]) + tuple(json.dumps(r["_config"].get(k), default=str) for k in config_keys)
         groups.setdefault(ident, []).append(r)
     n_expected = max(len(members) for members in groups.values())
+    # sweep order: models, then shapes, by when each was first run (start times have 1 s resolution)
+    first: dict[tuple[str, str], str] = {}
+    for r in rows:
+        for axis in ("model", "shape"):
+            k = (axis, str(r[axis]))
+            first[k] = min(first.get(k, r["started"]), r["started"])
+
+    def order(ms: list[dict[str, Any]]) -> tuple:
+        m, s = str(ms[0]["model"]), str(ms[0]["shape"])
+        return first[("model", m)], m, first[("shape", s)], s, min(x["started"] for x in ms)
+
     out = []
-    for members in sorted(groups.values(), key=lambda ms: min(m["started"] for m in ms)):  # sweep order
+    for members in sorted(groups.values(), key=order):
         ok = [m for m in members if m["status"] == "ok"]
         entry: dict[str, Any] = {"model": members[0]["model"], "shape": members[0]["shape"]}
         for k in labels:
