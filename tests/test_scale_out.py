@@ -13,6 +13,7 @@ import pytest
 import trimesh
 
 from ddfbench.launch import job_device, job_threads
+from ddfbench.report.__main__ import main as report_main
 from ddfbench.report.status import format_status, sweep_status
 from ddfbench.runs import RECORD_FIELDS, find_records
 from ddfbench.samples import Samples
@@ -190,7 +191,7 @@ def test_killed_sweep_resumes_without_loss_or_duplicates(tmp_path):
 
 # --- failed runs run again -----------------------------------------------------------------------
 
-def test_failed_runs_rerun_and_status_reports_them(tmp_path):
+def test_failed_runs_rerun_and_status_reports_them(tmp_path, capsys):
     mesh = tmp_path / "late.obj"
     args = ["shape.name=file", f"shape.path={mesh}", "+experiment/strategy=random"]  # both models
     launch(tmp_path, *args)
@@ -213,3 +214,6 @@ def test_failed_runs_rerun_and_status_reports_them(tmp_path):
     for key, rec in again.items():
         assert rec["_dir"] == first[key]["_dir"] and rec["error"] is None
     assert sweep_status(records_dir).complete
+    capsys.readouterr()
+    for argv in ([records_dir, "--status"], ["--status", records_dir]):  # the folder before or after the flag
+        assert report_main(argv) == 0 and "done 2  failed 0  missing 0" in capsys.readouterr().out

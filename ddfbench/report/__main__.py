@@ -73,7 +73,7 @@ def write_report(records_dir: str, out_dir: str, note: str | None = None,
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m ddfbench.report", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("records", help="folder of run records, e.g. results/ablation")
+    parser.add_argument("records", nargs="?", help="folder of run records, e.g. results/ablation")
     parser.add_argument("--out", help="report folder (default: reports/<name of the records folder>)")
     parser.add_argument("--note", help="a line written at the top of report.md (e.g. 'reduced budget: ...')")
     parser.add_argument("--plots", help=f"comma-separated plot kinds ({', '.join(PLOTS)}; 'none' for no plot); "
@@ -83,6 +83,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--status", nargs="*", metavar="OVERRIDE",
                         help="print done / failed / missing runs of the sweep instead of writing a report")
     args = parser.parse_args(argv)
+    if args.records is None and args.status and "=" not in args.status[0]:
+        args.records = args.status.pop(0)  # `--status results/<experiment>`: the folder came after the flag
+    if args.records is None:
+        parser.error("the folder of run records is required, e.g. results/ablation")
     if args.status is not None:
         from ddfbench.report import status
 
