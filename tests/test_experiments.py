@@ -11,6 +11,7 @@ import matplotlib.image
 import pandas as pd
 import pytest
 
+from ddfbench import CONF_DIR
 from ddfbench.report.plots import PLOTS_BY_EXPERIMENT
 from ddfbench.report.status import expected_grid
 from ddfbench.runs import RECORD_FIELDS, find_records
@@ -64,6 +65,23 @@ def test_capacity_sweeps_cover_every_family(tmp_path):
     for experiment in ("storage", "pareto", "smoke"):
         families = {swept(j)["+experiment/capacity"] for j in grid(experiment)}
         assert families == FAMILIES, experiment
+
+
+@pytest.mark.parametrize("experiment", ["storage", "pareto"])
+def test_gan_sdf_levels_set_its_fit_budget_and_others_keep_the_experiments(experiment):
+    """gan_sdf's network is fixed: its capacity level is train.max_seconds, taken from the level's row."""
+    from hydra import compose, initialize_config_dir
+
+    with initialize_config_dir(CONF_DIR, version_base="1.3"):
+        def composed(family, level):
+            return compose("config", overrides=[f"+experiment/capacity={family}", f"capacity={level}",
+                                                f"+experiment={experiment}"])
+        levels = ("c1", "c2", "c3", "c4")
+        gan = {lv: composed("gan_sdf", lv) for lv in levels}
+        ddf = {composed("ddf", lv).train.max_seconds for lv in levels}
+    budgets = [gan[lv].train.max_seconds for lv in levels]
+    assert budgets == [gan[lv].capacities.gan_sdf[lv].max_seconds for lv in levels]
+    assert len(set(budgets)) == 4 and len(ddf) == 1  # the bug this guards against: one budget for all levels
 
 
 def test_smoke_runs_every_family_and_strategy_and_reports(tmp_path):
