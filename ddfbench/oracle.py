@@ -100,17 +100,25 @@ class Oracle:
         for s in range(0, len(rays), _CHUNK):
             chunk = rays[s : s + _CHUNK]
             ans = self._scene.list_intersections(o3d.core.Tensor(chunk))
-            ray_ids = ans["ray_ids"].numpy().astype(np.int64)
+            ray_ids = ans["ray_ids"].numpy()
             t = ans["t_hit"].numpy().astype(np.float64)
             if len(t) == 0:
                 continue
-            order = np.lexsort((t, ray_ids))
+            # one sort key orders hits by ray, then by t (the fraction stays below 1; ids < 2^22
+            # leave it ~1e-9 of resolution, far below the merge tolerance)
+            order = np.argsort(ray_ids + t * (0.5 / (t.max() + 1.0)))
             ray_ids, t = ray_ids[order], t[order]
             new = np.ones(len(t), bool)
-            same_ray = ray_ids[1:] == ray_ids[:-1]
-            new[1:] = ~same_ray | (t[1:] - t[:-1] > 1e-6 * (1.0 + t[1:]))
+            new[1:] = (ray_ids[1:] != ray_ids[:-1]) | (np.abs(t[1:] - t[:-1]) > 1e-6 * (1.0 + t[1:]))
             out[s : s + len(chunk)] = np.bincount(ray_ids[new], minlength=len(chunk))
         return out
+
+    def any_hit(self, origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
+        """Whether each ray (N,3),(N,3) meets the surface at all (N,) bool: open3d's occlusion test,
+        the cheapest query (stops at the first triangle found); always open3d, like count_crossings."""
+        rays = np.hstack([_f32(origins).reshape(-1, 3), _f32(directions).reshape(-1, 3)])
+        return np.concatenate([self._scene.test_occlusions(o3d.core.Tensor(rays[s : s + _CHUNK])).numpy()
+                               for s in range(0, len(rays), _CHUNK)] or [np.zeros(0, bool)])
 
     # ---- points -----------------------------------------------------------------------------
     def _points(self, fn, points: np.ndarray, **kw) -> np.ndarray:

@@ -71,3 +71,16 @@ def test_closest_point_and_crossings(sphere, rng):
     far = np.tile([[-1.0, 0.0123, 0.0311]], (3, 1))  # off vertices and edges
     d = np.array([[1.0, 0, 0], [1.0, 0, 0], [0, 1.0, 0]])
     assert list(orc.count_crossings(far, d)) == [2, 2, 0]
+
+
+def test_any_hit_agrees_with_first_hit(sphere, rng):
+    """any_hit is true exactly where a ray meets the sphere (rays from outside and inside, both ways)."""
+    orc = Oracle(sphere.mesh)
+    o = rng.uniform(-0.9, 0.9, size=(4000, 3))
+    d = rng.normal(size=(4000, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    hit = orc.any_hit(o, d)
+    assert hit.dtype == bool and hit.shape == (4000,)
+    assert 0.1 < hit.mean() < 0.9  # both outcomes occur
+    assert np.array_equal(hit, np.isfinite(orc.hit_distance(o, d)))
+    assert np.array_equal(hit, orc.count_crossings(o, d) > 0)

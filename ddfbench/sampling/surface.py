@@ -144,7 +144,7 @@ def _marching_rays(pts, normals, p, oracle, rng, out: Collector, rejected, done:
     if p["perpendicular"] and len(x_esc):
         u = np.take(random_perpendicular(rng, th32), r[esc], axis=0)  # theta +- pi/2, one axis per ray
         for side in (u, -u):
-            miss = oracle.count_crossings(x_esc, side) == 0
+            miss = ~oracle.any_hit(x_esc, side)
             _count(rejected, "perpendicular_hit", (~miss).sum())
             out.add(x_esc[miss], side[miss], np.full(int(miss.sum()), np.inf, np.float32), done=done)
 
