@@ -53,33 +53,33 @@ class Oracle:
         geometric face normal (N,3) float32 oriented against the ray (zeros on a miss).
         """
         directions = _f32(directions).reshape(-1, 3)
-        t, tri = self._cast(origins, directions)
-        normal = np.zeros((len(t), 3), np.float32)
-        hit = tri >= 0
-        fn = self._face_normals[tri[hit]]
-        flip = np.einsum("ij,ij->i", fn, directions[hit]) > 0
-        fn[flip] *= -1
-        normal[hit] = fn
+        t, tri, normal = self._cast(origins, directions, normals=True)
+        facing = np.einsum("ij,ij->i", normal, directions)
+        normal *= np.where(facing > 0, np.float32(-1), np.float32(1))[:, None]
         return t, tri, normal
 
     def hit_distance(self, origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
         """t (N,) float32 of the first hit of rays (N,3),(N,3) (inf on a miss): first_hit without the normals."""
         return self._cast(origins, directions)[0]
 
-    def _cast(self, origins: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(t (N,) float32, triangle id (N,) int64) of the first hits; inf and -1 on a miss."""
+    def _cast(self, origins: np.ndarray, directions: np.ndarray,
+              normals: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+        """t (N,) float32 and triangle id (N,) int64 of the first hits (inf and -1 on a miss), and with
+        `normals` the unit face normal (N,3) float32 as stored (zeros on a miss), else None."""
         origins, directions = _f32(origins).reshape(-1, 3), _f32(directions).reshape(-1, 3)
         n = len(origins)
         t = np.full(n, np.inf, np.float32)
         tri = np.full(n, -1, np.int64)
+        normal = np.zeros((n, 3), np.float32) if normals else None
         for s in range(0, n, _CHUNK):
             sl = slice(s, min(n, s + _CHUNK))
             if self._embree is None:
                 ans = self._scene.cast_rays(o3d.core.Tensor(np.hstack([origins[sl], directions[sl]])))
-                tt = ans["t_hit"].numpy()
-                ids = ans["primitive_ids"].numpy().astype(np.int64)
-                ok = np.isfinite(tt)
-                t[sl][ok], tri[sl][ok] = tt[ok], ids[ok]
+                t[sl] = ans["t_hit"].numpy()  # inf on a miss
+                ids = ans["primitive_ids"].numpy()
+                tri[sl] = np.where(ids == o3d.t.geometry.RaycastingScene.INVALID_ID, -1, ids.astype(np.int64))
+                if normals:
+                    normal[sl] = ans["primitive_normals"].numpy()  # unit face normals, zeros on a miss
             else:
                 idx_tri, idx_ray, loc = self._embree.intersects_id(
                     origins[sl], directions[sl], multiple_hits=False, return_locations=True
@@ -87,7 +87,9 @@ class Oracle:
                 rays = idx_ray + s
                 t[rays] = np.einsum("ij,ij->i", loc - origins[rays], directions[rays])
                 tri[rays] = idx_tri
-        return t, tri
+                if normals:
+                    normal[rays] = self._face_normals[idx_tri]
+        return t, tri, normal
 
     def count_crossings(self, origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
         """Number of surface crossings along each ray (N,) int64.

@@ -19,6 +19,9 @@ def test_backends_agree_on_random_rays(bunny, rng):
     assert (hit1 != hit2).mean() < 1e-3
     both = hit1 & hit2
     assert np.abs(t1[both] - t2[both]).max() < 1e-4
+    same = both & (tri1 == tri2)  # open3d's own normals and the mesh's face normals, both turned to face the ray
+    assert same.mean() > 0.09 and np.abs(n1[same] - n2[same]).max() < 1e-4
+    assert np.all((n1 * d).sum(1)[hit1] < 0) and np.all(n1[~hit1] == 0) and np.all(n2[~hit2] == 0)
 
 
 def test_first_hit_on_sphere_is_analytic(sphere, rng):
@@ -32,9 +35,10 @@ def test_first_hit_on_sphere_is_analytic(sphere, rng):
     assert np.allclose(np.linalg.norm(n, axis=1), 1, atol=1e-5)
 
 
-def test_miss_is_inf():
+@pytest.mark.parametrize("backend", ["open3d", "embree"])
+def test_miss_is_inf(backend):
     box = load_shape({"name": "cube"})
-    t, tri, n = Oracle(box.mesh).first_hit(np.array([[2.0, 2.0, 2.0]]), np.array([[1.0, 0.0, 0.0]]))
+    t, tri, n = Oracle(box.mesh, backend).first_hit(np.array([[2.0, 2.0, 2.0]]), np.array([[1.0, 0.0, 0.0]]))
     assert np.isinf(t[0]) and tri[0] == -1 and np.all(n[0] == 0)
 
 
