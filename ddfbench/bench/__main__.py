@@ -53,7 +53,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--device", default="cpu", help="cpu | cuda | auto (torch work; open3d and scipy stay on the CPU)")
     ap.add_argument("--sizes", default="default", choices=sorted(SIZES),
                     help="problem sizes (small: seconds, for tests)")
-    ap.add_argument("--repeats", type=int, default=5, help="timed warm calls per figure (median and IQR)")
+    ap.add_argument("--repeats", type=int, default=9, help="timed warm calls per figure (median and IQR)")
     ap.add_argument("--warmup", type=int, default=1, help="untimed calls after the cold one")
     ap.add_argument("--threads", type=int, default=0,
                     help="torch threads (0: torch's default); open3d and scipy use every core")
