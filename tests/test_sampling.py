@@ -12,6 +12,7 @@ from ddfbench.oracle import Oracle
 from ddfbench.samples import Samples
 from ddfbench.sampling import available_strategies, build
 from ddfbench.sampling.box import box_interval
+from ddfbench.sampling.collect import Collector
 from ddfbench.sampling.directions import paper_eq10_directions, random_perpendicular, uniform_directions
 from ddfbench.sampling.steps import marching_distances
 from ddfbench.sampling.triangles import barycentric, face_plan
@@ -221,6 +222,25 @@ def test_too_many_samples_is_an_error(sphere, tmp_path):
     with pytest.raises(InputError, match="max_samples"):
         build(sphere, Oracle(sphere.mesh), config("surface", max_samples=1000), "rays", 0, str(tmp_path))
     assert not os.listdir(tmp_path)
+
+
+def test_collector_keeps_every_label_past_its_reservation_and_stops_at_the_cap(rng):
+    out = Collector(20, "test sampling")
+    out.expect(3, "rays", most=4)  # a reservation the sampler then outgrows
+    parts = [rng.random((k, 3), dtype=np.float32) for k in (3, 5, 6)]
+    for p in parts:
+        out.add(p, -p, np.where(p[:, 0] > 0.5, np.inf, p[:, 1]).astype(np.float32))
+    got = out.samples()
+    want = np.concatenate(parts)
+    assert np.array_equal(got.x, want) and np.array_equal(got.d, -want)
+    assert np.array_equal(got.hit, want[:, 0] <= 0.5) and got.sdf is None
+    sdf = Collector(20, "test sampling")
+    sdf.add(parts[0], sdf=parts[0][:, 0])
+    assert sdf.samples().d is None
+    full = Collector(10, "test sampling")
+    full.add(parts[2], -parts[2], parts[2][:, 0])
+    with pytest.raises(InputError, match="test sampling would give about 24 samples.*max_samples=10"):
+        full.add(parts[2], -parts[2], parts[2][:, 0], done=0.5)
 
 
 def test_zero_area_faces_of_an_unvalidated_mesh_are_never_sampled(rng, tmp_path):

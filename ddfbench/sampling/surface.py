@@ -28,7 +28,7 @@ Perpendicular rays that hit are dropped (counted as `perpendicular_hit`).
 Size: s_fc*F * s_dr * s_p marching candidates (F faces); a kept step gives 1 label, on an
 escaping ray up to 4. 29 bytes per ray label, 16 per SDF label. Measured on the bunny (56k
 faces): the default (total, 1 x 2 x 2) gives 3.5e5 labels, 10 MB; per_face s_fc = s_dr = s_p = 10
-gives 8.8e7 labels, 2.5 GB (peak memory about 5 GB). Work is streamed in chunks of about 2M
+gives 8.8e7 labels, 2.5 GB (peak resident memory 2.8 GB). Work is streamed in chunks of about 2M
 candidates; more than max_samples labels (default 1e8, 2.9 GB) stop the run with an InputError.
 """
 
@@ -53,6 +53,7 @@ KEYS = ("face_mode", "s_fc", "s_dr", "s_p", "barycentric", "directions", "steps"
 OFFSET = 1e-5  # forward rays leave from p + OFFSET theta, off p's own face
 TOL = 1e-5  # occlusion margin, backward-check tolerance and least height above the face (unit-cube units)
 CHUNK_CANDIDATES = 1 << 21
+LABELS_PER_CANDIDATE = {False: 2, True: 4}  # kept step, its escape label, two perpendicular misses
 
 
 def read_config(cfg: Mapping[str, Any]) -> dict[str, Any]:
@@ -82,7 +83,7 @@ def sample(shape: Shape, oracle: Oracle, cfg: Mapping[str, Any], kind: str,
     per_point = p["s_dr"] * p["s_p"]
     n_cand = len(faces) * per_point
     out = Collector(p["max_samples"], f"surface sampling of {shape.name} ({n_cand} candidates)")
-    out.expect(n_cand, kind)
+    out.expect(n_cand, kind, most=n_cand * (1 if kind == "sdf" else LABELS_PER_CANDIDATE[p["perpendicular"]]))
     rejected: dict[str, int] = {}
     for sl in chunks(len(faces), max(1, CHUNK_CANDIDATES // per_point)):
         pts = points_on_faces(shape.mesh, faces[sl], rng, p["barycentric"])
