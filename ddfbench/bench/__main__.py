@@ -85,7 +85,7 @@ def main(argv: list[str] | None = None) -> int:
             failed = f" FAILED {results[name].error}" if results[name].error else ""
             print(f"[bench] {name}: {results[name].seconds:.1f} s{failed}", file=sys.stderr, flush=True)
     doc = {
-        "command": "python -m ddfbench.bench " + " ".join(argv if argv is not None else sys.argv[1:]),
+        "command": " ".join(["python -m ddfbench.bench", *(argv if argv is not None else sys.argv[1:])]),
         "started": started, "total_s": time.perf_counter() - t0, "load_average_start": load,
         "options": {"device": device, "sizes": args.sizes, "repeats": args.repeats, "warmup": args.warmup,
                     "sections": sections},
