@@ -84,36 +84,46 @@ def fast_sweep(dist: np.ndarray, frozen: np.ndarray, h: float, rounds: int = 2, 
     """Solve |grad u| = 1 for the non-frozen nodes of an (n, n, n) grid; frozen values are boundary data.
 
     Up to `rounds` rounds of 8 Gauss-Seidel sweeps; stops early when a round changes no
-    value by more than tol*h. Returns (u (n, n, n) float32, rounds run).
+    value by more than tol*h (the last allowed round skips that bookkeeping). Returns
+    (u (n, n, n) float32, rounds run).
     """
     n = dist.shape[0]
     m = n + 2
     u = np.full((m, m, m), _FAR, np.float32)  # one padding layer: neighbours always exist
     u[1:-1, 1:-1, 1:-1] = np.where(frozen, dist, _FAR)
-    free = np.argwhere(~frozen).astype(np.int32)
-    flat = ((free[:, 0] + 1) * m + free[:, 1] + 1) * m + free[:, 2] + 1
+    free = np.flatnonzero(~frozen)  # row-major flat indices of the unpadded grid
+    i, rest = np.divmod(free, n * n)
+    j, k = np.divmod(rest, n)
+    del rest
+    flat = ((i + 1) * m + j + 1) * m + k + 1  # the same nodes in the padded grid (intp: no cast per gather)
+    del free
+    ijk = [a.astype(np.int16) for a in (i, j, k)]
+    del i, j, k
     h = np.float32(h)
     strides = (m * m, m, 1)
     done = 0
-    for _ in range(rounds):
+    for r in range(rounds):
+        last = r == rounds - 1
         change = 0.0
         for flips in ((0, 0, 0), (1, 0, 0), (0, 1, 0), (0, 0, 1)):
-            key = sum(np.where(f, n - 1 - free[:, a], free[:, a]) for a, f in enumerate(flips)).astype(np.int16)
+            key = sum((n - 1 - c) if f else c for c, f in zip(ijk, flips))  # int16 hyperplane number
             order = np.argsort(key, kind="stable")
-            bounds = np.r_[0, np.cumsum(np.bincount(key, minlength=3 * n - 2))]
-            levels = [flat[order[bounds[s]:bounds[s + 1]]] for s in range(3 * n - 2)]
+            levels = np.split(flat[order], np.cumsum(np.bincount(key, minlength=3 * n - 2))[:-1])
+            del key, order
             for sequence in (levels, levels[::-1]):  # an ordering and its opposite
                 for idx in sequence:
                     if idx.size:
-                        change = max(change, _godunov_update(u, idx, strides, h))
+                        change = max(change, _godunov_update(u, idx, strides, h, track=not last))
         done += 1
-        if change <= tol * float(h):
+        if not last and change <= tol * float(h):
             break
     return u[1:-1, 1:-1, 1:-1].copy(), done
 
 
-def _godunov_update(u: np.ndarray, idx: np.ndarray, strides: tuple[int, int, int], h: np.float32) -> float:
-    """One upwind update of the flat nodes idx of the padded grid u (in place); returns the largest decrease."""
+def _godunov_update(u: np.ndarray, idx: np.ndarray, strides: tuple[int, int, int], h: np.float32,
+                    track: bool = True) -> float:
+    """One upwind update of the flat nodes idx of the padded grid u (in place); returns the largest
+    decrease (0 when not `track`ed)."""
     flat_u = u.reshape(-1)
     a = [np.minimum(flat_u[idx - s], flat_u[idx + s]) for s in strides]
     lo, hi = np.minimum(a[0], a[1]), np.maximum(a[0], a[1])
@@ -129,6 +139,8 @@ def _godunov_update(u: np.ndarray, idx: np.ndarray, strides: tuple[int, int, int
     old = flat_u[idx]
     better = np.minimum(old, new)
     flat_u[idx] = better
+    if not track:
+        return 0.0
     dec = old - better
     dec = dec[old < _FAR]
     return float(dec.max()) if dec.size else 0.0
