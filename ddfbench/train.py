@@ -41,8 +41,9 @@ from ddfbench.representation import Budget, FitStats
 _CURVE_POINTS = 256  # the loss curve keeps at most 2x this many (step, seconds, mean loss) rows
 
 
-def resolve_device(name: str) -> str:
-    """'cpu' | 'cuda' | 'auto' -> the torch device string to use ('auto' picks cuda when available)."""
+def resolve_device(name: str, option: str = "train.device") -> str:
+    """'cpu' | 'cuda' | 'auto' -> the torch device string to use ('auto' picks cuda when available);
+    `option` names the setting in the error message."""
     name = str(name).lower()
     if name == "auto":
         return "cuda" if torch.cuda.is_available() else "cpu"
@@ -50,9 +51,9 @@ def resolve_device(name: str) -> str:
         return "cpu"
     if name.startswith("cuda"):
         if not torch.cuda.is_available():
-            raise InputError(f"train.device '{name}': CUDA is not available on this machine (use cpu or auto)")
+            raise InputError(f"{option} '{name}': CUDA is not available on this machine (use cpu or auto)")
         return name
-    raise InputError(f"train.device '{name}': unknown device (cpu | cuda | auto)")
+    raise InputError(f"{option} '{name}': unknown device (cpu | cuda | auto)")
 
 
 def seed_everything(seed: int) -> None:

@@ -87,6 +87,8 @@ def test_bad_options_are_refused(tmp_path, capsys):
     assert main(["--only", "sampling,nonsense", "--out", str(tmp_path)]) == 2
     assert "nonsense" in capsys.readouterr().err
     assert main(["--repeats", "0", "--out", str(tmp_path)]) == 2
+    assert main(["--device", "tpu", "--out", str(tmp_path)]) == 2
+    assert "--device 'tpu': unknown device" in capsys.readouterr().err
     with pytest.raises(SystemExit):
         main(["--sizes", "huge"])
     assert not list(tmp_path.iterdir())

@@ -62,7 +62,7 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     try:
         sections = parse_sections(args.only)
-        device = resolve_device(args.device)
+        device = resolve_device(args.device, "--device")
         if args.repeats < 1 or args.warmup < 0 or args.threads < 0:
             raise InputError(f"--repeats {args.repeats} / --warmup {args.warmup} / --threads {args.threads}: "
                              "need repeats >= 1, warmup >= 0, threads >= 0")
