@@ -22,6 +22,18 @@ def _f32(a: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(a, dtype=np.float32)
 
 
+def _rays(origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
+    """open3d's ray layout (N, 6) float32 [origin, direction], filled in one pass (casting as it copies)."""
+    rays = np.empty((len(origins), 6), np.float32)
+    rays[:, :3], rays[:, 3:] = origins, directions
+    return rays
+
+
+def _tensor(a: np.ndarray) -> o3d.core.Tensor:
+    """A zero-copy open3d view of a C-contiguous array (the tensor holds a reference to it)."""
+    return o3d.core.Tensor.from_numpy(np.ascontiguousarray(a))
+
+
 class Oracle:
     """Exact queries against a triangle mesh (N rays or points at a time, float32 results).
 
@@ -74,7 +86,7 @@ class Oracle:
         for s in range(0, n, _CHUNK):
             sl = slice(s, min(n, s + _CHUNK))
             if self._embree is None:
-                ans = self._scene.cast_rays(o3d.core.Tensor(np.hstack([origins[sl], directions[sl]])))
+                ans = self._scene.cast_rays(_tensor(_rays(origins[sl], directions[sl])))
                 t[sl] = ans["t_hit"].numpy()  # inf on a miss
                 ids = ans["primitive_ids"].numpy()
                 tri[sl] = np.where(ids == o3d.t.geometry.RaycastingScene.INVALID_ID, -1, ids.astype(np.int64))
@@ -97,11 +109,11 @@ class Oracle:
         open3d lists every triangle a ray touches, so a ray through a shared edge or vertex would
         count 2 to 6 times: hits on one ray whose t agree within 1e-6·(1 + t) are one crossing.
         """
-        rays = np.hstack([_f32(origins).reshape(-1, 3), _f32(directions).reshape(-1, 3)])
+        rays = _rays(np.reshape(origins, (-1, 3)), np.reshape(directions, (-1, 3)))
         out = np.zeros(len(rays), np.int64)
         for s in range(0, len(rays), _CHUNK):
             chunk = rays[s : s + _CHUNK]
-            ans = self._scene.list_intersections(o3d.core.Tensor(chunk))
+            ans = self._scene.list_intersections(_tensor(chunk))
             ray_ids = ans["ray_ids"].numpy()
             t = ans["t_hit"].numpy().astype(np.float64)
             if len(t) == 0:
@@ -118,14 +130,14 @@ class Oracle:
     def any_hit(self, origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
         """Whether each ray (N,3),(N,3) meets the surface at all (N,) bool: open3d's occlusion test,
         the cheapest query (stops at the first triangle found); always open3d, like count_crossings."""
-        rays = np.hstack([_f32(origins).reshape(-1, 3), _f32(directions).reshape(-1, 3)])
-        return np.concatenate([self._scene.test_occlusions(o3d.core.Tensor(rays[s : s + _CHUNK])).numpy()
+        rays = _rays(np.reshape(origins, (-1, 3)), np.reshape(directions, (-1, 3)))
+        return np.concatenate([self._scene.test_occlusions(_tensor(rays[s : s + _CHUNK])).numpy()
                                for s in range(0, len(rays), _CHUNK)] or [np.zeros(0, bool)])
 
     # ---- points -----------------------------------------------------------------------------
     def _points(self, fn, points: np.ndarray, **kw) -> np.ndarray:
         p = _f32(points).reshape(-1, 3)
-        out = [fn(o3d.core.Tensor(p[s : s + _CHUNK]), **kw).numpy() for s in range(0, len(p), _CHUNK)]
+        out = [fn(_tensor(p[s : s + _CHUNK]), **kw).numpy() for s in range(0, len(p), _CHUNK)]
         return np.concatenate(out) if out else np.zeros(0, np.float32)
 
     def occupancy(self, points: np.ndarray, seed: int = 0) -> np.ndarray:
@@ -142,8 +154,8 @@ class Oracle:
             q = p[s : s + max(1, _CHUNK // k)]
             d = rng.normal(size=(len(q) * k, 3)).astype(np.float32)
             d /= np.linalg.norm(d, axis=1, keepdims=True)
-            rays = np.hstack([np.repeat(q, k, axis=0), d])
-            odd = self._scene.count_intersections(o3d.core.Tensor(rays)).numpy() % 2
+            rays = _rays(np.repeat(q, k, axis=0), d)
+            odd = self._scene.count_intersections(_tensor(rays)).numpy() % 2
             votes[s : s + len(q)] = odd.reshape(len(q), k).sum(axis=1)
         return votes * 2 > k
 
@@ -161,7 +173,7 @@ class Oracle:
         p = _f32(points).reshape(-1, 3)
         cps, ids = [], []
         for s in range(0, len(p), _CHUNK):
-            ans = self._scene.compute_closest_points(o3d.core.Tensor(p[s : s + _CHUNK]))
+            ans = self._scene.compute_closest_points(_tensor(p[s : s + _CHUNK]))
             cps.append(ans["points"].numpy())
             ids.append(ans["primitive_ids"].numpy().astype(np.int64))
         if not cps:
