@@ -146,6 +146,9 @@ def sphere_trace(field: TorchField, origins: np.ndarray, directions: np.ndarray,
         escaping = torch.zeros_like(t, dtype=torch.bool)
         bracket: list[tuple[torch.Tensor, ...]] = []  # (ray idx, t_out, f_out, t_in, f_in, side)
 
+        scaled = opt.omega != 1.0  # steps are omega * r (per ray: omega falls back to 1)
+        relax = opt.omega > 1.0  # without over-relaxation no step is ever taken back
+        any_escaping = False  # set at step 0; the escape bookkeeping runs only while a ray escapes
         for step in range(opt.max_steps):
             if idx.numel() == 0:
                 break
@@ -154,40 +157,63 @@ def sphere_trace(field: TorchField, origins: np.ndarray, directions: np.ndarray,
             if step == 0:
                 escaping = f.abs() < opt.start_offset
                 side = torch.where(f < 0, -1.0, 1.0)
-            # escape phase: leave the surface the ray starts on
-            escaped = escaping & (f.abs() >= opt.start_offset)
-            side = torch.where(escaped, torch.where(f < 0, -1.0, 1.0), side)
-            escaping = escaping & ~escaped
-            stuck = escaping & (step >= opt.escape_steps)
+                any_escaping = bool(escaping.any())
+            done = None  # rays that stop this step (None: none yet)
+            free = None  # rays that take a sphere-tracing step (None: all)
+            if any_escaping:  # escape phase: leave the surface the ray starts on
+                escaped = escaping & (f.abs() >= opt.start_offset)
+                side = torch.where(escaped, torch.where(f < 0, -1.0, 1.0), side)
+                escaping = escaping & ~escaped
+                stuck = escaping & (step >= opt.escape_steps)
+                status[idx[stuck]] = int(RayStatus.UNDECIDED)
+                done, free = stuck, ~escaping
             r = side * f
-            relaxed = (omega > 1.0) & ~escaping & ~escaped & (step > 0)
-            step_len = t - t_prev
-            sor_fail = relaxed & (r_prev + r < step_len)
-            trace = ~escaping & ~sor_fail
+            if relax:
+                relaxed = (omega > 1.0) & (step > 0)
+                if any_escaping:
+                    relaxed &= ~escaping & ~escaped
+                sor_fail = relaxed & (r_prev + r < t - t_prev)
+                free = ~sor_fail if free is None else free & ~sor_fail
             tol = opt.eps * t + opt.eps_abs
-            converged = trace & (r.abs() < tol)
-            crossed = trace & (r <= -tol)
+            converged = r.abs() < tol
+            crossed = r <= -tol
+            if free is not None:
+                converged &= free
+                crossed &= free
 
             status[idx[converged]] = int(RayStatus.HIT)
             t_out[idx[converged]] = (t + r)[converged]
-            status[idx[stuck]] = int(RayStatus.UNDECIDED)
             if bool(crossed.any()):
                 c = crossed
                 bracket.append((idx[c], t_prev[c], r_prev[c], t[c], r[c], side[c]))
                 status[idx[c]] = int(RayStatus.HIT)
+            done = converged | crossed if done is None else done | converged | crossed
 
             # next position; a relaxed step past the far bound falls back to the plain step
-            omega = torch.where(sor_fail | (t + omega * r > t_far), torch.ones_like(omega), omega)
-            new_t = torch.where(escaping, t + opt.start_offset, t + omega * r)
-            new_t = torch.where(sor_fail, t_prev + r_prev, new_t)
-            t_prev = torch.where(sor_fail | escaping, t_prev, t)
-            r_prev = torch.where(sor_fail | escaping, r_prev, r)
+            if scaled:
+                past = t + omega * r > t_far
+                omega = torch.where(sor_fail | past if relax else past, torch.ones_like(omega), omega)
+                new_t = t + omega * r
+            else:
+                new_t = t + r
+            if any_escaping:
+                new_t = torch.where(escaping, t + opt.start_offset, new_t)
+            if relax:
+                new_t = torch.where(sor_fail, t_prev + r_prev, new_t)
+                held = sor_fail | escaping if any_escaping else sor_fail
+                t_prev, r_prev = torch.where(held, t_prev, t), torch.where(held, r_prev, r)
+            elif any_escaping:
+                t_prev, r_prev = torch.where(escaping, t_prev, t), torch.where(escaping, r_prev, r)
+            else:
+                t_prev, r_prev = t, r
             t = new_t
-            missed = ~(converged | crossed | stuck) & (t > t_far)  # left the box: no evaluation there
-
-            keep = ~(converged | crossed | stuck | missed)
-            idx, t, t_far, t_prev, r_prev = idx[keep], t[keep], t_far[keep], t_prev[keep], r_prev[keep]
-            side, omega, escaping = side[keep], omega[keep], escaping[keep]
+            keep = ~(done | (t > t_far))  # a ray past the far bound left the box: no evaluation there
+            idx, t, t_far, t_prev, r_prev, side = idx[keep], t[keep], t_far[keep], t_prev[keep], r_prev[keep], side[keep]
+            if scaled:
+                omega = omega[keep]
+            if any_escaping:
+                escaping = escaping[keep]
+                any_escaping = bool(escaping.any())
         trace_steps = evals
         status[idx] = int(RayStatus.UNDECIDED)
 

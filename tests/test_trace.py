@@ -160,6 +160,17 @@ def test_over_relaxation_saves_steps_along_a_plane():
     assert relaxed.trace_steps < 0.7 * plain.trace_steps
 
 
+def test_under_relaxation_finds_the_same_hits_in_more_steps():
+    o, d = random_rays(2000, 8)
+    plain = sphere_trace(sphere, o, d, DOMAIN, TraceOptions(omega=1.0, max_steps=4000))
+    under = sphere_trace(sphere, o, d, DOMAIN, TraceOptions(omega=0.7, max_steps=4000))  # room for grazing rays
+    exact, disc = analytic_hit(o, d)
+    assert plain.hit.sum() > 500 and np.array_equal(under.hit, plain.hit)
+    clear = under.hit & (disc > 1e-3)  # off the silhouette, where |f| < tol pins t down
+    assert clear.sum() > 400 and np.abs(under.t[clear] - exact[clear]).max() < 1e-3
+    assert under.trace_steps > 1.5 * plain.trace_steps  # steps of 0.7 r, not r
+
+
 def test_secondary_rays_do_not_self_hit():
     rng = np.random.default_rng(7)
     n = 2000
