@@ -11,6 +11,8 @@ edge, so the parities use open3d's raw crossing counts.
 
 from __future__ import annotations
 
+from typing import Iterator
+
 import numpy as np
 import open3d as o3d
 import trimesh
@@ -22,11 +24,14 @@ def _f32(a: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(a, dtype=np.float32)
 
 
-def _rays(origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
-    """open3d's ray layout (N, 6) float32 [origin, direction], filled in one pass (casting as it copies)."""
+def _ray_chunks(origins: np.ndarray, directions: np.ndarray) -> Iterator[tuple[slice, o3d.core.Tensor]]:
+    """Rays (N,3),(N,3) packed once in open3d's layout (N, 6) float32 [origin, direction] (casting as it
+    copies), then handed out as (rows, zero-copy tensor) of at most _CHUNK rays."""
+    origins, directions = np.reshape(origins, (-1, 3)), np.reshape(directions, (-1, 3))
     rays = np.empty((len(origins), 6), np.float32)
     rays[:, :3], rays[:, 3:] = origins, directions
-    return rays
+    for s in range(0, len(rays), _CHUNK):
+        yield slice(s, min(len(rays), s + _CHUNK)), _tensor(rays[s : s + _CHUNK])
 
 
 def _tensor(a: np.ndarray) -> o3d.core.Tensor:
@@ -78,29 +83,30 @@ class Oracle:
               normals: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
         """t (N,) float32 and triangle id (N,) int64 of the first hits (inf and -1 on a miss), and with
         `normals` the unit face normal (N,3) float32 as stored (zeros on a miss), else None."""
-        origins, directions = _f32(origins).reshape(-1, 3), _f32(directions).reshape(-1, 3)
-        n = len(origins)
+        n = len(np.reshape(origins, (-1, 3)))
         t = np.full(n, np.inf, np.float32)
         tri = np.full(n, -1, np.int64)
         normal = np.zeros((n, 3), np.float32) if normals else None
-        for s in range(0, n, _CHUNK):
-            sl = slice(s, min(n, s + _CHUNK))
-            if self._embree is None:
-                ans = self._scene.cast_rays(_tensor(_rays(origins[sl], directions[sl])))
+        if self._embree is None:
+            for sl, rays in _ray_chunks(origins, directions):
+                ans = self._scene.cast_rays(rays)
                 t[sl] = ans["t_hit"].numpy()  # inf on a miss
                 ids = ans["primitive_ids"].numpy()
                 tri[sl] = np.where(ids == o3d.t.geometry.RaycastingScene.INVALID_ID, -1, ids.astype(np.int64))
                 if normals:
                     normal[sl] = ans["primitive_normals"].numpy()  # unit face normals, zeros on a miss
-            else:
-                idx_tri, idx_ray, loc = self._embree.intersects_id(
-                    origins[sl], directions[sl], multiple_hits=False, return_locations=True
-                )
-                rays = idx_ray + s
-                t[rays] = np.einsum("ij,ij->i", loc - origins[rays], directions[rays])
-                tri[rays] = idx_tri
-                if normals:
-                    normal[rays] = self._face_normals[idx_tri]
+            return t, tri, normal
+        origins, directions = _f32(origins).reshape(-1, 3), _f32(directions).reshape(-1, 3)
+        for s in range(0, n, _CHUNK):
+            sl = slice(s, min(n, s + _CHUNK))
+            idx_tri, idx_ray, loc = self._embree.intersects_id(
+                origins[sl], directions[sl], multiple_hits=False, return_locations=True
+            )
+            rays = idx_ray + s
+            t[rays] = np.einsum("ij,ij->i", loc - origins[rays], directions[rays])
+            tri[rays] = idx_tri
+            if normals:
+                normal[rays] = self._face_normals[idx_tri]
         return t, tri, normal
 
     def count_crossings(self, origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
@@ -109,11 +115,9 @@ class Oracle:
         open3d lists every triangle a ray touches, so a ray through a shared edge or vertex would
         count 2 to 6 times: hits on one ray whose t agree within 1e-6·(1 + t) are one crossing.
         """
-        rays = _rays(np.reshape(origins, (-1, 3)), np.reshape(directions, (-1, 3)))
-        out = np.zeros(len(rays), np.int64)
-        for s in range(0, len(rays), _CHUNK):
-            chunk = rays[s : s + _CHUNK]
-            ans = self._scene.list_intersections(_tensor(chunk))
+        out = np.zeros(len(np.reshape(origins, (-1, 3))), np.int64)
+        for sl, rays in _ray_chunks(origins, directions):
+            ans = self._scene.list_intersections(rays)
             ray_ids = ans["ray_ids"].numpy()
             t = ans["t_hit"].numpy().astype(np.float64)
             if len(t) == 0:
@@ -124,15 +128,14 @@ class Oracle:
             ray_ids, t = ray_ids[order], t[order]
             new = np.ones(len(t), bool)
             new[1:] = (ray_ids[1:] != ray_ids[:-1]) | (np.abs(t[1:] - t[:-1]) > 1e-6 * (1.0 + t[1:]))
-            out[s : s + len(chunk)] = np.bincount(ray_ids[new], minlength=len(chunk))
+            out[sl] = np.bincount(ray_ids[new], minlength=sl.stop - sl.start)
         return out
 
     def any_hit(self, origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
         """Whether each ray (N,3),(N,3) meets the surface at all (N,) bool: open3d's occlusion test,
         the cheapest query (stops at the first triangle found); always open3d, like count_crossings."""
-        rays = _rays(np.reshape(origins, (-1, 3)), np.reshape(directions, (-1, 3)))
-        return np.concatenate([self._scene.test_occlusions(_tensor(rays[s : s + _CHUNK])).numpy()
-                               for s in range(0, len(rays), _CHUNK)] or [np.zeros(0, bool)])
+        return np.concatenate([self._scene.test_occlusions(rays).numpy() for _, rays in _ray_chunks(origins, directions)]
+                               or [np.zeros(0, bool)])
 
     # ---- points -----------------------------------------------------------------------------
     def _points(self, fn, points: np.ndarray, **kw) -> np.ndarray:
@@ -154,8 +157,8 @@ class Oracle:
             q = p[s : s + max(1, _CHUNK // k)]
             d = rng.normal(size=(len(q) * k, 3)).astype(np.float32)
             d /= np.linalg.norm(d, axis=1, keepdims=True)
-            rays = _rays(np.repeat(q, k, axis=0), d)
-            odd = self._scene.count_intersections(_tensor(rays)).numpy() % 2
+            odd = np.concatenate([self._scene.count_intersections(rays).numpy()
+                                  for _, rays in _ray_chunks(np.repeat(q, k, axis=0), d)]) % 2
             votes[s : s + len(q)] = odd.reshape(len(q), k).sum(axis=1)
         return votes * 2 > k
 
