@@ -26,13 +26,15 @@ KEY_FILE = "ddfbench_key.txt"  # written in each Hydra job folder: which record 
 @hydra.main(version_base="1.3", config_path=CONF_DIR, config_name="config")
 def task(cfg: DictConfig) -> str:
     """One Hydra job: resolve the config, run it, return the record key."""
-    from ddfbench import launch, runner
+    from ddfbench import launch, runner, runs, tracking
     from ddfbench.report.tables import summarize, to_markdown
 
     hc = HydraConfig.get()
     plain: dict[str, Any] = OmegaConf.to_container(cfg, resolve=True)  # type: ignore[assignment]
     plain["threads"], device = launch.job_settings(plain, hc)
     record = runner.run(plain, choices=dict(hc.runtime.choices), overrides=list(hc.overrides.task), device=device)
+    out_dir = str(plain.get("out_dir", "results"))  # tracking comes after the record is on disk, and never fails the run
+    tracking.track(record, runs.run_dir(out_dir, record["experiment"], record["key"]), plain.get("tracking"), out_dir)
     with open(os.path.join(hc.runtime.output_dir, KEY_FILE), "w") as fh:
         fh.write(f"{record['experiment']}/{record['key']}\n")
     if hc.mode == RunMode.RUN:
