@@ -124,7 +124,7 @@ def record_artifacts(record: Mapping[str, Any], run_dir: str) -> list[tuple[str,
 
 
 @contextlib.contextmanager
-def _bounded_and_quiet(timeout_s: float, max_retries: int) -> Iterator[None]:
+def bounded_and_quiet(timeout_s: float, max_retries: int) -> Iterator[None]:
     """Bound MLflow's HTTP retries and timeout (an unreachable server fails in seconds, not minutes),
     send no usage telemetry, and keep MLflow's, alembic's and urllib3's log lines out of the run's
     output. Variables the user has set win."""
@@ -204,7 +204,7 @@ def track(record: Mapping[str, Any], run_dir: str, tracking: Mapping[str, Any] |
         return None
     uri = str(tracking.get("uri") or default_uri(out_dir))
     try:
-        with _bounded_and_quiet(float(tracking.get("timeout_s", 10)), int(tracking.get("max_retries", 0))):
+        with bounded_and_quiet(float(tracking.get("timeout_s", 10)), int(tracking.get("max_retries", 0))):
             return log_record(record, run_dir, uri, tracking.get("experiment"))
     except Exception as exc:  # tracking is an extra: the record on disk is what counts
         hint = " (pip install -e \".[tracking]\")" if isinstance(exc, ImportError) else ""
