@@ -3,6 +3,7 @@
 Writes, from the run records below the folder:
   table.md, table.csv, table.tex   one row per configuration (ddfbench.report.tables)
   <kind>.png, <kind>.pdf           the experiment's plots (ddfbench.report.plots: PLOTS_BY_EXPERIMENT)
+  gallery.png                      renders beside the oracle's, error maps, meshes (ddfbench.report.gallery)
   report.md                        the note, the sweep's status (runs done / failed / missing), the
                                    table, the plots, and every record key the table was built from
 `--status [OVERRIDE ...]` prints which runs of the sweep are done, failed or missing instead
@@ -17,6 +18,7 @@ import sys
 from collections import Counter
 from typing import Any
 
+from ddfbench.report.gallery import write_gallery
 from ddfbench.report.plots import PLOTS, plots_for, write_plots
 from ddfbench.report.tables import summarize, to_csv, to_latex, to_markdown
 from ddfbench.runs import find_records
@@ -55,6 +57,8 @@ def write_report(records_dir: str, out_dir: str, note: str | None = None,
     to_csv(df, os.path.join(out_dir, "table.csv"))
     experiment = _experiment(records, records_dir)
     written = write_plots(records, out_dir, kinds if kinds is not None else plots_for(experiment))
+    gallery = write_gallery(records, out_dir, caption=note)
+    written += [gallery] if gallery else []
     lines = [f"# {experiment}", ""]
     if note:
         lines += [f"**{note}**", ""]

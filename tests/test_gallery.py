@@ -1,0 +1,26 @@
+"""The report's gallery: the extracted mesh seen from the run's camera, and no figure without renders."""
+
+import numpy as np
+import trimesh
+
+from ddfbench.report.gallery import _BACKGROUND, shaded_mesh_view, write_gallery
+
+SCENE = {"outputs": ["depth"], "width": 32, "height": 24, "cameras": {"n": 1, "radius": 2.0, "elevation_deg": 0.0, "azimuth_deg": 0.0,
+                                                 "fov_deg": 40.0}}
+
+
+def test_mesh_view_lights_the_mesh_and_leaves_the_rest_background(tmp_path):
+    path = str(tmp_path / "box.ply")
+    trimesh.creation.box(extents=(0.5, 0.5, 0.5)).export(path)
+    image = shaded_mesh_view(path, SCENE)
+    assert image.shape == (24, 32, 3)
+    background = np.all(np.isclose(image, _BACKGROUND), axis=-1)
+    assert not background[12, 16] and background[0, 0] and background[23, 31]  # box in the middle only
+    assert 0.1 < (~background).mean() < 0.6
+    assert np.all(shaded_mesh_view(str(tmp_path / "missing.ply"), SCENE) == _BACKGROUND)
+
+
+def test_no_renders_no_gallery(tmp_path):
+    records = [{"status": "ok", "model": "mesh", "shape": {"name": "cube"}, "artifacts": {}, "_dir": str(tmp_path)}]
+    assert write_gallery(records, str(tmp_path)) is None
+    assert not (tmp_path / "gallery.png").exists()
