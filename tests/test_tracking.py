@@ -20,8 +20,9 @@ SMALL = ["shape=cube", "eval=smoke", "sampling=random", "sampling.n_samples=2000
          "experiment_name=trk", "threads=1", "quiet=true"]
 
 
-def ddfbench(out_dir, *args):
-    return subprocess.run([sys.executable, "-m", "ddfbench", *SMALL, f"out_dir={out_dir}", *args],
+def ddfbench(out_dir, *args, multirun=False):
+    flags = ["-m"] if multirun else []
+    return subprocess.run([sys.executable, "-m", "ddfbench", *flags, *SMALL, f"out_dir={out_dir}", *args],
                           capture_output=True, text=True, env=dict(os.environ, PYTHONUNBUFFERED="1"), timeout=600)
 
 
@@ -32,7 +33,7 @@ def mlflow_runs(uri, experiment="trk"):
 
 
 def test_sweep_logs_each_run_once_even_when_resumed(tmp_path):
-    out = ddfbench(tmp_path, "-m", "model=mesh,mesh_lod500", "tracking=mlflow")
+    out = ddfbench(tmp_path, "model=mesh,mesh_lod500", "tracking=mlflow", multirun=True)
     assert out.returncode == 0, out.stderr[-3000:]
     assert "warning" not in out.stderr.lower()
     uri = f"sqlite:///{tmp_path}/mlflow.db"
@@ -51,7 +52,7 @@ def test_sweep_logs_each_run_once_even_when_resumed(tmp_path):
         assert {"record.json", "reconstruction.ply", "renders"} <= top
         assert {a.path for a in client.list_artifacts(run.info.run_id, "renders")} == {
             "renders/cam0_depth.png", "renders/cam0_mask.png"}
-    again = ddfbench(tmp_path, "-m", "model=mesh,mesh_lod500", "tracking=mlflow")  # resumed: both skipped
+    again = ddfbench(tmp_path, "model=mesh,mesh_lod500", "tracking=mlflow", multirun=True)  # resumed: both skipped
     assert again.returncode == 0, again.stderr[-3000:]
     assert sorted(r.info.run_id for r in mlflow_runs(uri)[1]) == sorted(r.info.run_id for r in runs)
 

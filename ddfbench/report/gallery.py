@@ -10,6 +10,7 @@ normals (a head light). Runs without renders are left out; a report with none ge
 from __future__ import annotations
 
 import os
+import textwrap
 from typing import Any
 
 import numpy as np
@@ -125,7 +126,8 @@ def write_gallery(records: list[dict[str, Any]], out_dir: str, caption: str | No
                 ax.set_ylabel(model, fontsize=10)
     text = ("Each cell, camera 0: oracle render | family render | per-pixel error (normals: angle / 45°, depth: "
             "|Δt| / 0.05; black 0, white ≥ scale) | extracted mesh shaded from the same camera")
-    fig.suptitle(text + (f"\n{caption}" if caption else ""), fontsize=9)
+    width_chars = int(13 * 5.6 * len(shapes))  # about what a 9-point line holds across the figure
+    fig.suptitle("\n".join(textwrap.wrap(text, width_chars) + textwrap.wrap(caption or "", width_chars)), fontsize=9)
     path = os.path.join(out_dir, GALLERY)
     fig.savefig(path, dpi=150)
     plt.close(fig)
