@@ -12,8 +12,10 @@ What one MLflow run holds (MLflow experiment = the ddfbench experiment name):
              mlflow.source.git.commit, ddfbench_finished
   metrics    every finite number of the record's metrics and cost, under its own name
              (chamfer_l2, fscore.0.01, storage_bytes, fit_s, ...)
-  history    probe.<name> (probe.chamfer_l2, probe.fscore.0.01): the accuracy probes of the fit;
-             the MLflow step is the fit time in milliseconds, so step = accuracy against time
+  history    probe.<name> (probe.chamfer_l2, probe.fscore.0.01, probe.fit_s, probe.step): the fit's
+             accuracy probes; MLflow step = probe index (0, 1, ...: log-spaced over the budget), and
+             each point's timestamp = run start + fit time, so a chart's "relative time" axis, or
+             probe.fit_s chosen as its x axis, shows accuracy against fit time
   artifacts  record.json, renders/*.png, reconstruction.ply
 """
 
@@ -71,14 +73,16 @@ def record_metrics(record: Mapping[str, Any]) -> dict[str, float]:
     return {metric_name(k): v for k, raw in flat.items() if (v := _number(raw)) is not None}
 
 
-def probe_history(record: Mapping[str, Any]) -> list[tuple[str, float, int]]:
-    """(name, value, step = fit time in ms) for every number of every accuracy probe of the fit."""
+def probe_history(record: Mapping[str, Any]) -> list[tuple[str, float, int, int]]:
+    """(name, value, step = probe index, fit time in ms) for every number of every accuracy probe.
+
+    Names: probe.chamfer_l2, probe.fscore.0.01, ..., probe.step (training step), probe.fit_s."""
     out = []
-    for probe in (record.get("fit") or {}).get("probes") or []:
-        step = int(round(1000 * float(probe.get("seconds", 0.0))))
+    for index, probe in enumerate((record.get("fit") or {}).get("probes") or []):
+        fit_ms = int(round(1000 * float(probe.get("seconds", 0.0))))
         for key, raw in probe.items():
-            if key != "seconds" and (v := _number(raw)) is not None:
-                out.append((f"probe.{metric_name(key)}", v, step))
+            if (v := _number(raw)) is not None:
+                out.append((f"probe.{'fit_s' if key == 'seconds' else metric_name(key)}", v, index, fit_ms))
     return out
 
 
@@ -181,7 +185,7 @@ def log_record(record: Mapping[str, Any], run_dir: str, uri: str, experiment: st
     run_id = run.info.run_id
     start, end = run.info.start_time, _ms(record.get("finished")) or run.info.start_time
     metrics = [Metric(k, v, end, 0) for k, v in record_metrics(record).items()]
-    metrics += [Metric(k, v, start + step, step) for k, v, step in probe_history(record)]
+    metrics += [Metric(k, v, start + fit_ms, index) for k, v, index, fit_ms in probe_history(record)]
     params = [Param(k, v) for k, v in record_params(record).items()]
     client.log_batch(run_id, metrics=metrics, params=params, tags=[RunTag(k, v) for k, v in tags.items()])
     for path, folder in record_artifacts(record, run_dir):

@@ -75,7 +75,7 @@ def test_unreachable_server_is_one_warning_and_the_run_stays_ok(tmp_path):
     assert len(warnings) == 1 and f"127.0.0.1:{port}" in warnings[0] and "record kept" in warnings[0], out.stderr
 
 
-def test_probes_become_a_metric_history_over_fit_milliseconds(tmp_path):
+def test_probes_become_a_metric_history_over_fit_time(tmp_path):
     seconds = [0.1, 0.3, 0.9, 2.7, 8.1]
     record = {"key": "0123456789abcdef", "experiment": "trk", "status": "ok", "family": "ddf", "model": "ddf",
               "shape": {"name": "bone"}, "sampling": {"strategy": "surface"}, "config": {"seed": 0},
@@ -92,9 +92,13 @@ def test_probes_become_a_metric_history_over_fit_milliseconds(tmp_path):
         run_id = tracking.log_record(record, str(run_dir), uri)
         assert tracking.log_record(record, str(run_dir), uri) is None  # already there
     client = mlflow.MlflowClient(uri)
-    history = sorted((m.step, m.value) for m in client.get_metric_history(run_id, "probe.chamfer_l2"))
-    assert [step for step, _ in history] == [100, 300, 900, 2700, 8100]
-    assert [v for _, v in history] == pytest.approx([1e-3 / (i + 1) for i in range(5)])
+    history = sorted((m.step, m.timestamp, m.value) for m in client.get_metric_history(run_id, "probe.chamfer_l2"))
+    start = client.get_run(run_id).info.start_time
+    assert [step for step, _, _ in history] == [0, 1, 2, 3, 4]
+    assert [t - start for _, t, _ in history] == [100, 300, 900, 2700, 8100]  # fit time in ms
+    assert [v for _, _, v in history] == pytest.approx([1e-3 / (i + 1) for i in range(5)])
+    fit_s = sorted((m.step, m.value) for m in client.get_metric_history(run_id, "probe.fit_s"))
+    assert [v for _, v in fit_s] == pytest.approx(seconds)
     assert len(client.get_metric_history(run_id, "probe.fscore.0.01")) == 5
     metrics = client.get_run(run_id).data.metrics
     assert "render_warm_s" not in metrics and metrics["empty_reconstruction"] == 0.0  # non-finite left out
