@@ -58,6 +58,11 @@ class MeshFamily(Representation):
             stats.probes.append({"step": 1, "seconds": seconds, **probe(self)})
         return stats
 
+    def to(self, device: str) -> "MeshFamily":
+        """Cast on `device` from now on (the warp backend; open3d and embree stay on the CPU)."""
+        self._set_mesh(self.mesh, device)
+        return self
+
     def intersect(self, origins: np.ndarray, directions: np.ndarray, normals: bool = True) -> Hits:
         """Embree first hit, never the surface a ray starts on: a hit closer than T_MIN is cast again
         from T_MIN further along (up to 3 times, doubling T_MIN, for starts that graze a facet)."""
