@@ -43,3 +43,4 @@ def test_race_sweep_and_capacities(race):
     caps = sec["details"]["capacities"]
     assert list(caps) == ["c1", "c2", "c3", "c4"]
     assert [caps[c]["width"] for c in caps] == [64, 128, 256, 512]
+
