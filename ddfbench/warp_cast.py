@@ -116,8 +116,11 @@ class WarpCaster:
 
     def __init__(self, vertices: np.ndarray, faces: np.ndarray, device: str = "cpu"):
         self.device = torch.device(device)
-        if self.device.type == "cuda" and not wp.is_cuda_available():
-            raise InputError(f"warp device '{device}': Warp sees no CUDA device on this machine (use cpu)")
+        if self.device.type == "cuda":
+            if not (wp.is_cuda_available() and torch.cuda.is_available()):
+                raise InputError(f"warp device '{device}': no CUDA device on this machine (use cpu)")
+            if self.device.index is None:  # "cuda" -> the current device, as torch places tensors
+                self.device = torch.device("cuda", torch.cuda.current_device())
         wdev = wp.device_from_torch(self.device)
         points = np.ascontiguousarray(vertices, np.float32).reshape(-1, 3)
         faces = np.ascontiguousarray(faces, np.int32).reshape(-1, 3)
@@ -136,7 +139,7 @@ class WarpCaster:
         normal (N,3) float32 by winding order (zeros on a miss), on the same device, ordered on
         torch's current stream (no host round trip).
         """
-        if origins.device != self.device and not (self.device.type == origins.device.type == "cuda"):
+        if origins.device != self.device:
             raise ValueError(f"rays on {origins.device}, Warp mesh on {self.device}")
         origins = origins.detach().to(torch.float32).reshape(-1, 3).contiguous()
         directions = directions.detach().to(torch.float32).reshape(-1, 3).contiguous()
