@@ -1,6 +1,7 @@
 """`python -m ddfbench.bench` at the tiniest sizes: the outputs' structure, ratios that are finite,
 positive and consistent with the figures beside them. No timing assertions."""
 
+import importlib.util
 import json
 import math
 
@@ -44,7 +45,7 @@ def test_each_issue_comparison_is_present(small_run):
     _, doc, _ = small_run
     rows = {name: [r["measure"] + " | " + r["reference"] for r in sec["rows"]] for name, sec in doc["sections"].items()}
     assert any("open3d cast_rays" in r for r in rows["sampling"])
-    for backend in ("open3d", "embree"):
+    for backend in ("open3d", "embree") + (("warp",) if importlib.util.find_spec("warp") else ()):
         for kind in ("primary", "incoherent"):
             assert any(f"backend {backend}, {kind}" in r for r in rows["oracle"])
     for what in ("distance + visibility |", "+ normals |"):
