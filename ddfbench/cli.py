@@ -8,6 +8,7 @@ record and the sweep goes on. Nothing here holds module-level state (launchers p
 
 from __future__ import annotations
 
+import logging
 import os
 import sys
 from typing import Any
@@ -26,17 +27,20 @@ KEY_FILE = "ddfbench_key.txt"  # written in each Hydra job folder: which record 
 @hydra.main(version_base="1.3", config_path=CONF_DIR, config_name="config")
 def task(cfg: DictConfig) -> str:
     """One Hydra job: resolve the config, run it, return the record key."""
-    from ddfbench import launch, runner, runs, tracking
+    from ddfbench import launch, runner
     from ddfbench.report.tables import summarize, to_markdown
 
     hc = HydraConfig.get()
     plain: dict[str, Any] = OmegaConf.to_container(cfg, resolve=True)  # type: ignore[assignment]
     plain["threads"], device = launch.job_settings(plain, hc)
     record = runner.run(plain, choices=dict(hc.runtime.choices), overrides=list(hc.overrides.task), device=device)
-    out_dir = str(plain.get("out_dir", "results"))  # tracking comes after the record is on disk, and never fails the run
-    tracking.track(record, runs.run_dir(out_dir, record["experiment"], record["key"]), plain.get("tracking"), out_dir)
     with open(os.path.join(hc.runtime.output_dir, KEY_FILE), "w") as fh:
         fh.write(f"{record['experiment']}/{record['key']}\n")
+    if hc.mode == RunMode.MULTIRUN:
+        from ddfbench.progress import job_finished
+
+        if (text := job_finished(os.path.dirname(hc.runtime.output_dir), record)) is not None:
+            print(text, flush=True)
     if hc.mode == RunMode.RUN:
         if not cfg.get("quiet", False):
             print(to_markdown(summarize([record])))
@@ -47,7 +51,17 @@ def task(cfg: DictConfig) -> str:
 
 
 class SweepTableCallback(Callback):
-    """At the end of a sweep, print the table of the records this sweep produced."""
+    """Sweep progress lines (ddfbench.progress) and, at the end of a sweep, the table of its records."""
+
+    def on_multirun_start(self, config: DictConfig, **kwargs: Any) -> None:
+        from ddfbench.progress import count_jobs, start_sweep
+
+        sweeper = config.hydra.sweeper
+        total = count_jobs(list(config.hydra.overrides.task), sweeper.get("params"), sweeper.get("n_trials"))
+        start_sweep(str(config.hydra.sweep.dir), total)
+        if config.get("quiet", False) or os.environ.get("CI"):  # CI logs: only the progress lines
+            for launcher_log in ("hydra", "hydra_plugins"):
+                logging.getLogger(launcher_log).setLevel(logging.WARNING)
 
     def on_multirun_end(self, config: DictConfig, **kwargs: Any) -> None:
         from ddfbench.report.tables import summarize, to_markdown

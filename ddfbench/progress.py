@@ -1,124 +1,93 @@
-"""Sweep progress: one line per finished job of a multirun, whatever the launcher.
+"""Sweep progress: one line per finished job, whatever the launcher.
 
-  [12/32] ddf bunny ok  chamfer 0.345e-3  fit 60 s  elapsed 8:10  eta 13:40
+    [12/32] ddf bunny ok  chamfer 0.35e-3  fit 60 s  elapsed 8:10  eta 13:40
 
-The basic launcher ends jobs in the main process, joblib in worker processes and submitit on other
-machines, so the callback keeps no state in memory: at the start of the sweep the main process
-writes the job count and start time into <sweep dir>/.progress/sweep.json, and each finished job
-claims the next number by creating <sweep dir>/.progress/<n> exclusively (atomic on one file
-system), so two jobs ending at once never print the same count. A job whose ok record was already
-there (a resumed sweep) counts as done and says `skipped`. Plain lines, flushed: a CI log gets them
-as they happen and nothing redrawn.
+`start_sweep` runs once in the launching process (Hydra's on_multirun_start) and writes the job
+count and start time into the sweep folder; `job_finished` runs in whichever process ran the job
+(the launcher's own for the basic launcher, a worker for joblib) and takes the next count under a
+file lock, so parallel workers never print the same number. Skipped runs (an ok record existed)
+count as done.
 """
 
 from __future__ import annotations
 
+import fcntl
 import json
+import math
 import os
 import time
-from typing import Any
+from typing import Any, Mapping
 
-from hydra.core.override_parser.overrides_parser import OverridesParser
-from hydra.core.utils import JobStatus
-from hydra.experimental.callback import Callback
-from hydra.types import RunMode
-from omegaconf import DictConfig
-
-PROGRESS_DIR = ".progress"
+STATE_FILE = "progress.json"
+COUNT_FILE = "progress.count"
 
 
-def sweep_size(sweeper_params: dict[str, Any], command_line: list[str]) -> int:
-    """Jobs in a basic-sweeper grid: the product of the sweep lengths, the command line winning per key."""
-    from hydra._internal.core_plugins.basic_sweeper import BasicSweeper
+def count_jobs(overrides: list[str], sweeper_params: Mapping[str, Any] | None, n_trials: int | None = None) -> int:
+    """How many jobs a sweep launches: the product of its sweep lists (the basic sweeper's rule), or
+    n_trials for a sweeper that samples trials (Optuna)."""
+    if n_trials:
+        return int(n_trials)
+    from hydra.core.override_parser.overrides_parser import OverridesParser
 
-    overrides = [f"{k}={v}" for k, v in sweeper_params.items()] + list(command_line)
-    batches = BasicSweeper.split_arguments(OverridesParser.create().parse_overrides(overrides), None)
-    return len(batches[0])
+    args = [f"{k}={v}" for k, v in (sweeper_params or {}).items()] + list(overrides)
+    sizes: dict[str, int] = {}
+    for o in OverridesParser.create().parse_overrides(args):
+        sizes[o.get_key_element()] = len(list(o.sweep_string_iterator())) if o.is_discrete_sweep() else 1
+    return math.prod(sizes.values())
+
+
+def start_sweep(sweep_dir: str, total: int) -> None:
+    """Record the job count and the start time of a sweep in its folder."""
+    os.makedirs(sweep_dir, exist_ok=True)
+    with open(os.path.join(sweep_dir, STATE_FILE), "w") as fh:
+        json.dump({"total": int(total), "started": time.time()}, fh)
+    with open(os.path.join(sweep_dir, COUNT_FILE), "w") as fh:
+        fh.write("0")
+
+
+def _next_count(sweep_dir: str) -> int:
+    """Increment the sweep's finished-job counter under an exclusive lock; return the new value."""
+    with open(os.path.join(sweep_dir, COUNT_FILE), "r+") as fh:
+        fcntl.flock(fh, fcntl.LOCK_EX)
+        done = int(fh.read().strip() or 0) + 1
+        fh.seek(0)
+        fh.truncate()
+        fh.write(str(done))
+        fh.flush()
+        return done
 
 
 def clock(seconds: float) -> str:
-    """7.9 → 0:08, 490 → 8:10, 3725 → 1:02:05."""
+    """h:mm:ss or m:ss."""
     s = int(round(max(seconds, 0.0)))
-    return f"{s // 3600}:{s % 3600 // 60:02d}:{s % 60:02d}" if s >= 3600 else f"{s // 60}:{s % 60:02d}"
+    h, rest = divmod(s, 3600)
+    return f"{h}:{rest // 60:02d}:{rest % 60:02d}" if h else f"{rest // 60}:{rest % 60:02d}"
 
 
-def claim_number(folder: str) -> int:
-    """The next free n ≥ 1 whose file folder/n this call created (exclusive create: unique under races)."""
-    n = len([f for f in os.listdir(folder) if f.isdigit()]) + 1
-    while True:
-        try:
-            os.close(os.open(os.path.join(folder, str(n)), os.O_CREAT | os.O_EXCL | os.O_WRONLY))
-            return n
-        except FileExistsError:
-            n += 1
-
-
-def job_summary(record: dict[str, Any] | None, sweep_started: float) -> str:
-    """'ddf bunny ok  chamfer 0.345e-3  fit 60 s' (or '... failed  <error>', '... skipped  ...')."""
-    if record is None:
-        return "no record"
-    label = f"{record.get('model')} {(record.get('shape') or {}).get('name')}"
-    if record.get("status") != "ok":
-        return f"{label} failed  {str(record.get('error') or '')[:100]}"
-    finished = record.get("finished")
-    skipped = bool(finished) and _epoch(finished) < sweep_started - 1.0
-    parts = [f"{label} {'skipped' if skipped else 'ok'}"]
-    metrics = record.get("metrics") or {}
-    chamfer = metrics.get("chamfer_l2")
-    if metrics.get("empty_reconstruction"):
+def line(done: int, total: int, record: Mapping[str, Any], elapsed: float) -> str:
+    """The progress line of one finished job."""
+    shape = (record.get("shape") or {}).get("name", "?")
+    parts = [f"[{done}/{total}] {record.get('model', record.get('family', '?'))} {shape} {record.get('status', '?')}"]
+    chamfer = (record.get("metrics") or {}).get("chamfer_l2")
+    if "empty_reconstruction" in (record.get("flags") or []):
         parts.append("chamfer penalty (empty mesh)")
     elif isinstance(chamfer, (int, float)):
         parts.append(f"chamfer {chamfer * 1e3:.3g}e-3" if chamfer < 1 else f"chamfer {chamfer:.3g}")
-    fit = (record.get("cost") or {}).get("fit_s")
-    if isinstance(fit, (int, float)):
-        parts.append(f"fit {fit:.0f} s" if fit >= 10 else f"fit {fit:.1f} s")
+    fit_s = (record.get("cost") or {}).get("fit_s")
+    if isinstance(fit_s, (int, float)):
+        parts.append(f"fit {fit_s:.3g} s")
+    parts.append(f"elapsed {clock(elapsed)}")
+    if done < total:
+        parts.append(f"eta {clock(elapsed / done * (total - done))}")
     return "  ".join(parts)
 
 
-def _epoch(iso: str) -> float:
-    import datetime as _dt
-
-    return _dt.datetime.fromisoformat(iso).timestamp()
-
-
-def progress_line(done: int, total: int, summary: str, elapsed_s: float) -> str:
-    """'[done/total] summary  elapsed m:ss  eta m:ss' (eta from the mean time per finished job so far)."""
-    eta = elapsed_s / done * max(total - done, 0) if done else 0.0
-    return f"[{done}/{total}] {summary}  elapsed {clock(elapsed_s)}  eta {clock(eta)}"
-
-
-def _read_record(config: DictConfig, key: Any) -> dict[str, Any] | None:
-    from ddfbench.runs import read_record
-
-    if not isinstance(key, str):
+def job_finished(sweep_dir: str, record: Mapping[str, Any]) -> str | None:
+    """Count the job as done and return its progress line (None where the sweep has no state)."""
+    state_path = os.path.join(sweep_dir, STATE_FILE)
+    if not os.path.exists(state_path):
         return None
-    return read_record(os.path.join(str(config.get("out_dir", "results")), str(config.experiment_name), key,
-                                    "record.json"))
-
-
-class SweepProgressCallback(Callback):
-    """Hydra callback (conf/config.yaml hydra.callbacks): the per-job progress lines of a multirun."""
-
-    def on_multirun_start(self, config: DictConfig, **kwargs: Any) -> None:
-        folder = os.path.join(str(config.hydra.sweep.dir), PROGRESS_DIR)
-        os.makedirs(folder, exist_ok=True)
-        total = sweep_size(dict(config.hydra.sweeper.get("params") or {}), list(config.hydra.overrides.task))
-        with open(os.path.join(folder, "sweep.json"), "w") as fh:
-            json.dump({"total": total, "started": time.time()}, fh)
-
-    def on_job_end(self, config: DictConfig, job_return: Any, **kwargs: Any) -> None:
-        if config.hydra.mode != RunMode.MULTIRUN:
-            return
-        folder = os.path.join(str(config.hydra.sweep.dir), PROGRESS_DIR)
-        try:
-            with open(os.path.join(folder, "sweep.json")) as fh:
-                sweep = json.load(fh)
-        except (OSError, ValueError):
-            return  # a sweeper or launcher that skipped on_multirun_start: no line rather than a wrong one
-        done = claim_number(folder)
-        if job_return.status == JobStatus.FAILED:  # the task raised (runner.run itself never does)
-            exc = job_return._return_value
-            summary = f"job #{config.hydra.job.num} failed  {type(exc).__name__}: {str(exc).strip()[:100]}"
-        else:
-            summary = job_summary(_read_record(config, job_return.return_value), float(sweep["started"]))
-        print(progress_line(done, int(sweep["total"]), summary, time.time() - float(sweep["started"])), flush=True)
+    with open(state_path) as fh:
+        state = json.load(fh)
+    done = _next_count(sweep_dir)
+    return line(done, max(int(state["total"]), done), record, time.time() - float(state["started"]))

@@ -1,104 +1,109 @@
-"""MLflow tracking against a real SQLite store in a temp folder: what a run logs, an unreachable
-server (the run stays ok, one warning line), a resumed sweep (no duplicate MLflow runs), backfill."""
+"""MLflow tracking against a real SQLite store in a temporary folder (no mocks)."""
 
+import logging
 import os
 import socket
-import subprocess
-import sys
 
 import pytest
+from hydra import compose, initialize_config_dir
+from omegaconf import OmegaConf
 
-mlflow = pytest.importorskip("mlflow")
+from ddfbench import CONF_DIR, runner, runs
+from ddfbench.report.export_mlflow import export
+from ddfbench.tracking import KEY_TAG, default_uri, log_record
 
-from ddfbench import tracking  # noqa: E402
-from ddfbench.report.export_mlflow import main as export_main  # noqa: E402
-from ddfbench.runs import find_records  # noqa: E402
-
-# Cheap deterministic runs (cube, mesh families) with one tiny depth render, so there are PNGs to log.
-SMALL = ["shape=cube", "eval=smoke", "sampling=random", "sampling.n_samples=2000", "scene=depth", "scene.width=8",
-         "scene.height=8", "scene.cameras.n=1", "scene.timing.repeats=1", "scene.timing.warmup=0",
-         "experiment_name=trk", "threads=1", "quiet=true"]
+mlflow = pytest.importorskip("mlflow", reason='the tracking extra is not installed (pip install -e ".[tracking]")')
 
 
-def ddfbench(out_dir, *args, multirun=False):
-    flags = ["-m"] if multirun else []
-    return subprocess.run([sys.executable, "-m", "ddfbench", *flags, *SMALL, f"out_dir={out_dir}", *args],
-                          capture_output=True, text=True, env=dict(os.environ, PYTHONUNBUFFERED="1"), timeout=600)
+def _cfg(out_dir, *overrides):
+    with initialize_config_dir(CONF_DIR, version_base="1.3"):
+        cfg = compose("config", overrides=["shape=sphere", "eval.n_points=2000", "eval.mesh_resolution=24",
+                                           f"out_dir={out_dir}", "threads=1", *overrides])
+    return OmegaConf.to_container(cfg, resolve=True)
 
 
-def mlflow_runs(uri, experiment="trk"):
+def _runs(uri, experiment="single"):
     client = mlflow.MlflowClient(uri)
     exp = client.get_experiment_by_name(experiment)
-    return client, (client.search_runs([exp.experiment_id]) if exp else [])
+    return [] if exp is None else client.search_runs([exp.experiment_id]), client
 
 
-def test_sweep_logs_each_run_once_even_when_resumed(tmp_path):
-    out = ddfbench(tmp_path, "model=mesh,mesh_lod500", "tracking=mlflow", multirun=True)
-    assert out.returncode == 0, out.stderr[-3000:]
-    assert "warning" not in out.stderr.lower()
-    uri = f"sqlite:///{tmp_path}/mlflow.db"
-    client, runs = mlflow_runs(uri)
-    assert sorted(r.data.tags["model"] for r in runs) == ["mesh", "mesh_lod500"]
-    keys = {r["key"]: r for r in find_records(str(tmp_path / "trk"))}
-    for run in runs:
-        rec = keys[run.data.tags[tracking.KEY_TAG]]
-        assert run.data.tags["family"] == "mesh" and run.data.tags["shape"] == "cube"
-        assert run.data.tags["strategy"] == "random" and run.data.tags["seed"] == "0"
-        assert run.data.metrics["chamfer_l2"] == pytest.approx(rec["metrics"]["chamfer_l2"])
-        assert run.data.metrics["storage_bytes"] == rec["cost"]["storage_bytes"]
-        assert run.data.metrics["fscore.0.01"] == pytest.approx(rec["metrics"]["fscore"]["0.01"])
-        assert run.data.params["sampling.n_samples"] == "2000"
-        top = {a.path for a in client.list_artifacts(run.info.run_id)}
-        assert {"record.json", "reconstruction.ply", "renders"} <= top
-        assert {a.path for a in client.list_artifacts(run.info.run_id, "renders")} == {
-            "renders/cam0_depth.png", "renders/cam0_mask.png"}
-    again = ddfbench(tmp_path, "model=mesh,mesh_lod500", "tracking=mlflow", multirun=True)  # resumed: both skipped
-    assert again.returncode == 0, again.stderr[-3000:]
-    assert sorted(r.info.run_id for r in mlflow_runs(uri)[1]) == sorted(r.info.run_id for r in runs)
-
-    backfill_uri = f"sqlite:///{tmp_path}/backfill.db"  # backfill the same records elsewhere, twice
-    assert export_main([str(tmp_path / "trk"), "--uri", backfill_uri]) == 0
-    assert export_main([str(tmp_path / "trk"), "--uri", backfill_uri]) == 0
-    _, backfilled = mlflow_runs(backfill_uri)
-    assert sorted(r.data.tags[tracking.KEY_TAG] for r in backfilled) == sorted(keys)
-
-
-def test_unreachable_server_is_one_warning_and_the_run_stays_ok(tmp_path):
-    with socket.socket() as s:  # a port nothing listens on
-        s.bind(("127.0.0.1", 0))
-        port = s.getsockname()[1]
-    out = ddfbench(tmp_path, "model=mesh", "tracking=mlflow", f"tracking.uri=http://127.0.0.1:{port}")
-    assert out.returncode == 0, out.stderr[-3000:]
-    (rec,) = find_records(str(tmp_path))
+def test_mesh_run_is_logged_with_tags_metrics_and_artifacts(tmp_path):
+    rec = runner.run(_cfg(tmp_path, "model=mesh", "tracking=mlflow", "scene.width=16", "scene.height=16"))
     assert rec["status"] == "ok"
-    warnings = [line for line in out.stderr.splitlines() if line.strip()]
-    assert len(warnings) == 1 and f"127.0.0.1:{port}" in warnings[0] and "record kept" in warnings[0], out.stderr
+    found, client = _runs(default_uri(str(tmp_path)))
+    assert len(found) == 1
+    run = found[0]
+    assert run.data.tags[KEY_TAG] == rec["key"]
+    assert run.data.tags["family"] == "mesh" and run.data.tags["shape"] == "sphere"
+    assert run.data.metrics["chamfer_l2"] == pytest.approx(rec["metrics"]["chamfer_l2"])
+    assert run.data.metrics["storage_bytes"] == rec["cost"]["storage_bytes"]
+    assert run.data.params["model.family"] == "mesh"
+    top = {a.path for a in client.list_artifacts(run.info.run_id)}
+    assert {"record.json", "renders"} <= top
+    assert any(a.path.endswith(".png") for a in client.list_artifacts(run.info.run_id, "renders"))
 
 
-def test_probes_become_a_metric_history_over_fit_time(tmp_path):
-    seconds = [0.1, 0.3, 0.9, 2.7, 8.1]
-    record = {"key": "0123456789abcdef", "experiment": "trk", "status": "ok", "family": "ddf", "model": "ddf",
-              "shape": {"name": "bone"}, "sampling": {"strategy": "surface"}, "config": {"seed": 0},
-              "started": "2026-01-01T00:00:00+00:00", "finished": "2026-01-01T00:01:00+00:00",
-              "metrics": {"chamfer_l2": 3e-4, "fscore": {"0.01": 0.6}, "empty_reconstruction": False},
-              "cost": {"fit_s": 60.0, "render_warm_s": "inf"},
-              "fit": {"probes": [{"step": 10 * i, "seconds": s, "chamfer_l2": 1e-3 / (i + 1), "fscore@0.01": 0.1 * i}
-                                 for i, s in enumerate(seconds)]}}
-    uri = f"sqlite:///{tmp_path}/mlflow.db"
-    run_dir = tmp_path / "run"
-    run_dir.mkdir()
-    (run_dir / "record.json").write_text("{}")
-    with tracking.bounded_and_quiet(10, 0):
-        run_id = tracking.log_record(record, str(run_dir), uri)
-        assert tracking.log_record(record, str(run_dir), uri) is None  # already there
-    client = mlflow.MlflowClient(uri)
-    history = sorted((m.step, m.timestamp, m.value) for m in client.get_metric_history(run_id, "probe.chamfer_l2"))
-    start = client.get_run(run_id).info.start_time
-    assert [step for step, _, _ in history] == [0, 1, 2, 3, 4]
-    assert [t - start for _, t, _ in history] == [100, 300, 900, 2700, 8100]  # fit time in ms
-    assert [v for _, _, v in history] == pytest.approx([1e-3 / (i + 1) for i in range(5)])
-    fit_s = sorted((m.step, m.value) for m in client.get_metric_history(run_id, "probe.fit_s"))
-    assert [v for _, v in fit_s] == pytest.approx(seconds)
-    assert len(client.get_metric_history(run_id, "probe.fscore.0.01")) == 5
-    metrics = client.get_run(run_id).data.metrics
-    assert "render_warm_s" not in metrics and metrics["empty_reconstruction"] == 0.0  # non-finite left out
+def test_learned_run_has_a_probe_history_over_fit_time(tmp_path):
+    rec = runner.run(_cfg(tmp_path, "model=neural_sdf", "model.width=16", "model.depth=2", "train.max_steps=60",
+                          "train.max_seconds=30", "train.n_probes=5", "train.probe_points=500", "tracking=mlflow",
+                          "scene=none"))
+    assert rec["status"] == "ok"
+    found, client = _runs(default_uri(str(tmp_path)))
+    history = client.get_metric_history(found[0].info.run_id, "probe_chamfer_l2")
+    assert len(history) >= 5
+    steps = [m.step for m in history]
+    assert steps == sorted(steps)
+    assert steps[-1] == round(1000 * rec["fit"]["probes"][-1]["seconds"])
+
+
+def test_resumed_run_is_not_logged_twice(tmp_path):
+    cfg = _cfg(tmp_path, "model=mesh", "tracking=mlflow", "scene=none")
+    first = runner.run(cfg)
+    second = runner.run(cfg)  # skipped: an ok record exists
+    assert first["key"] == second["key"]
+    found, _ = _runs(default_uri(str(tmp_path)))
+    assert len(found) == 1
+
+
+def _closed_port():
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def test_unreachable_server_leaves_the_run_ok_with_one_warning(tmp_path, caplog):
+    uri = f"http://127.0.0.1:{_closed_port()}"
+    with caplog.at_level(logging.WARNING):
+        rec = runner.run(_cfg(tmp_path, "model=mesh", "tracking=mlflow", f"tracking.uri={uri}", "scene=none"))
+    assert rec["status"] == "ok"
+    assert runs.is_done(runs.record_path(str(tmp_path), "single", rec["key"]))
+    warnings = [r for r in caplog.records if r.levelno >= logging.WARNING and r.name == "ddfbench.tracking"]
+    assert len(warnings) == 1 and uri in warnings[0].getMessage()
+
+
+def test_tracking_does_not_change_the_record_key(tmp_path):
+    assert runs.config_key(_cfg(tmp_path, "model=mesh")) == runs.config_key(_cfg(tmp_path, "model=mesh", "tracking=mlflow"))
+
+
+def test_backfill_logs_every_record_once(tmp_path):
+    for model in ("mesh", "grid_sdf"):
+        runner.run(_cfg(tmp_path, f"model={model}", "model.resolution=24" if model == "grid_sdf" else "model.faces=0",
+                        "scene=none"))
+    uri = default_uri(str(tmp_path / "elsewhere"))
+    os.makedirs(tmp_path / "elsewhere")
+    assert export(str(tmp_path / "single"), uri) == (2, 0)
+    assert export(str(tmp_path / "single"), uri) == (0, 2)
+    found, _ = _runs(uri)
+    assert sorted(r.data.tags["family"] for r in found) == ["grid_sdf", "mesh"]
+
+
+def test_failed_record_is_logged_as_failed(tmp_path):
+    record = {"key": "abc", "status": "failed", "error": "fit of x failed: NaN loss", "experiment": "e",
+              "family": "ddf", "model": "ddf", "shape": {"name": "bunny"}, "config": {"seed": 0}, "metrics": {},
+              "cost": {"fit_s": 1.5}, "artifacts": {}}
+    runs.write_json_atomic(str(tmp_path / "r" / "record.json"), record)
+    uri = default_uri(str(tmp_path))
+    assert log_record(uri, record, str(tmp_path / "r")) is not None
+    found, _ = _runs(uri, "e")
+    assert found[0].info.status == "FAILED" and found[0].data.tags["error"].startswith("fit of x failed")

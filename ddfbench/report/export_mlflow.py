@@ -1,10 +1,10 @@
-"""`python -m ddfbench.report.export_mlflow results/<experiment> [--uri URI] [--experiment NAME]`
+"""Backfill MLflow from existing run records (needs the `tracking` extra).
 
-Backfills run records already on disk into MLflow (needs `pip install -e ".[tracking]"`), one MLflow
-run per record, exactly as `tracking=mlflow` logs a new run (ddfbench/tracking.py). Idempotent: a
-record already logged (same key and finish time) is left alone, so running it again adds nothing.
-Default store: sqlite:///<out_dir>/mlflow.db, out_dir being the folder that holds the experiment
-folders (results/ for results/<experiment>/<key>/record.json).
+    python -m ddfbench.report.export_mlflow results/ablation                 # into sqlite:///results/mlflow.db
+    python -m ddfbench.report.export_mlflow results/ablation --uri http://host:5000
+
+Every record.json below the folder becomes one MLflow run (ddfbench.tracking.log_record); records
+already logged (same key and status) are left alone, so running it twice adds nothing.
 """
 
 from __future__ import annotations
@@ -13,48 +13,37 @@ import argparse
 import os
 import sys
 
-from ddfbench import tracking
 from ddfbench.runs import find_records
+from ddfbench.tracking import default_uri, log_record
 
 
-def out_dir_of(run_dir: str) -> str:
-    """results/<experiment>/<key> → results."""
-    return os.path.dirname(os.path.dirname(os.path.normpath(run_dir)))
-
-
-def export(records_dir: str, uri: str | None = None, experiment: str | None = None) -> tuple[int, int]:
-    """Log every record below records_dir; return (runs logged now, records already there).
-    Raises what MLflow raises: a backfill is asked for, so a failure ends it with an error."""
+def export(records_dir: str, uri: str) -> tuple[int, int]:
+    """Log every record below records_dir to uri; return (logged, already there)."""
     logged = present = 0
     for record in find_records(records_dir):
         run_dir = record.pop("_dir")
-        target = uri or tracking.default_uri(out_dir_of(run_dir))
-        with tracking.bounded_and_quiet(10.0, 0):
-            run_id = tracking.log_record(record, run_dir, target, experiment)
-        logged, present = (logged + 1, present) if run_id else (logged, present + 1)
+        if log_record(uri, record, run_dir) is None:
+            present += 1
+        else:
+            logged += 1
     return logged, present
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m ddfbench.report.export_mlflow", description=__doc__,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("records", help="folder of run records, e.g. results/representations")
-    parser.add_argument("--uri", help="MLflow tracking URI (default: sqlite:///<out_dir>/mlflow.db)")
-    parser.add_argument("--experiment", help="MLflow experiment name (default: each record's experiment)")
-    args = parser.parse_args(argv)
-    if not os.path.isdir(args.records):
-        print(f"export_mlflow: {args.records}: no such folder of run records", file=sys.stderr)
+    ap = argparse.ArgumentParser(prog="python -m ddfbench.report.export_mlflow", description=__doc__.splitlines()[0])
+    ap.add_argument("records_dir", help="a folder of run records, e.g. results/<experiment>")
+    ap.add_argument("--uri", help="MLflow tracking URI (default: sqlite:///<parent of records_dir>/mlflow.db)")
+    args = ap.parse_args(argv)
+    if not os.path.isdir(args.records_dir):
+        print(f"export_mlflow: {args.records_dir}: not a folder", file=sys.stderr)
         return 2
+    uri = args.uri or default_uri(os.path.dirname(os.path.abspath(args.records_dir)))
     try:
-        logged, present = export(args.records, args.uri, args.experiment)
+        logged, present = export(args.records_dir, uri)
     except ImportError:
         print('export_mlflow: mlflow is not installed (pip install -e ".[tracking]")', file=sys.stderr)
         return 2
-    except Exception as exc:
-        first = (str(exc).strip().splitlines() or [""])[0]
-        print(f"export_mlflow: {args.uri or 'sqlite store'}: {type(exc).__name__}: {first}", file=sys.stderr)
-        return 1
-    print(f"export_mlflow: {logged} runs logged, {present} already in MLflow")
+    print(f"{uri}: {logged} runs logged, {present} already there")
     return 0
 
 
