@@ -21,6 +21,7 @@ import logging
 import math
 import os
 import re
+from pathlib import Path
 from typing import Any, Iterator, Mapping
 
 log = logging.getLogger(__name__)
@@ -107,9 +108,16 @@ def _logged_run(client: Any, experiment_id: str, record: Mapping[str, Any]) -> b
     return any(r.data.tags.get("status") == record.get("status") for r in found)
 
 
-def _experiment_id(client: Any, name: str) -> str:
+def _experiment_id(client: Any, name: str, uri: str) -> str:
+    """The experiment's id, created where missing. A SQLite store keeps its artifacts in mlartifacts/
+    beside the database (MLflow's default is ./mlruns under whatever folder the run started in)."""
     exp = client.get_experiment_by_name(name)
-    return exp.experiment_id if exp is not None else client.create_experiment(name)
+    if exp is not None:
+        return exp.experiment_id
+    location = None
+    if uri.startswith("sqlite:///"):
+        location = Path(uri[len("sqlite:///"):]).parent.joinpath("mlartifacts").as_uri()
+    return client.create_experiment(name, artifact_location=location)
 
 
 def _artifacts(client: Any, run_id: str, run_dir: str, record: Mapping[str, Any]) -> None:
@@ -135,7 +143,7 @@ def log_record(uri: str, record: Mapping[str, Any], run_dir: str) -> str | None:
     from mlflow.tracking import MlflowClient
 
     client = MlflowClient(tracking_uri=uri)
-    experiment_id = _experiment_id(client, str(record.get("experiment", "single")))
+    experiment_id = _experiment_id(client, str(record.get("experiment", "single")), uri)
     if _logged_run(client, experiment_id, record):
         return None
     run = client.create_run(experiment_id, tags=record_tags(record))
