@@ -31,7 +31,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import matplotlib.ticker  # noqa: E402
 import numpy as np  # noqa: E402
 
-from ddfbench.metrics import penalty_metrics  # noqa: E402
+from ddfbench.metric_registry import by_name as registry_metrics  # noqa: E402
 from ddfbench.report.tables import override_labels  # noqa: E402
 
 PLOTS_BY_EXPERIMENT: dict[str, tuple[str, ...]] = {
@@ -46,7 +46,7 @@ PLOTS_BY_EXPERIMENT: dict[str, tuple[str, ...]] = {
 DEFAULT_PLOTS = ("fit_curves", "pareto")
 COST_AXES = (("render_warm_s", "warm render time (s)"), ("fit_s", "fit time (s)"), ("storage_bytes", "storage (bytes)"))
 SURFACE_FACTORS = ("s_fc", "s_dr", "s_p")
-PENALTY_CHAMFER_L2 = penalty_metrics([])["chamfer_l2"]  # what an empty reconstruction scores
+PENALTY_CHAMFER_L2 = registry_metrics()["chamfer_l2"].penalty  # what an empty reconstruction scores
 
 
 def pareto_front(x: Iterable[float], y: Iterable[float]) -> np.ndarray:
