@@ -278,3 +278,32 @@ def test_equal_values_are_not_marked_and_empty_reconstructions_are_counted():
     assert sorted(df["n_empty"]) == [0, 1]
     md = tables.to_markdown(df)
     assert "**" not in md.split("\n\n")[0] and "1 (1 empty)" in md and "defined penalty" in md
+
+
+def test_records_from_mixed_commits_are_refused_unless_allowed(tmp_path):
+    recs = [make_record(seed=0), make_record(seed=1)]
+    recs[1]["env"] = {"git_sha": "def"}
+    for r in recs:
+        write_json_atomic(str(tmp_path / "rec" / r["key"] / "record.json"), r)
+    out = tmp_path / "rep"
+    assert report_main([str(tmp_path / "rec"), "--out", str(out), "--plots", "none"]) == 2
+    assert not (out / "table.md").exists()
+    assert report_main([str(tmp_path / "rec"), "--out", str(out), "--plots", "none", "--allow-mixed-commits"]) == 0
+    assert "Mixed code commits: abc, def" in (out / "report.md").read_text()
+
+
+def test_paired_differences_of_the_ablation_against_its_base():
+    from ddfbench.report import paired
+
+    base = {"strategy": "surface", "s_fc": 10, "s_dr": 10, "s_p": 10}
+    recs = [make_record(seed=s, sampling=base, chamfer=1e-3 + 1e-5 * s) for s in (0, 1, 2)]
+    recs += [make_record(seed=s, sampling=base | {"s_p": 30}, chamfer=5e-4 + 1e-5 * s + 1e-6 * s * s) for s in (0, 1, 2)]
+    recs += [make_record(seed=5, sampling=base | {"s_p": 30}, chamfer=1.0)]  # no partner seed: not paired
+    for r in recs:
+        r["experiment"] = "ablation"
+    (row,) = paired.compare_settings(recs, "chamfer_l2", paired.surface_levels, "s_fc=10 s_dr=10 s_p=10")
+    assert row["setting"] == "s_fc=10 s_dr=10 s_p=30" and row["diff"].n == 3
+    assert row["diff"].mean == pytest.approx(-5e-4 + 5e-6 / 3) and row["diff"].hi < 0
+    md = paired.paired_report("ablation", recs)
+    assert "| s_fc=10 s_dr=10 s_p=30 | 3 |" in md and "| yes |" in md
+    assert paired.paired_report("storage", recs) is None

@@ -20,6 +20,11 @@ def sweep(out_dir, *extra):
     return {(r["family"], r["config"]["seed"]): r for r in find_records(str(out_dir))}
 
 
+def losses(rec):
+    """(step, mean loss) rows of the loss curve (its seconds column is wall clock)."""
+    return [(step, loss) for step, _, loss in rec["fit"]["loss_curve"]]
+
+
 def geometry(rec):
     return {k: v for k, v in rec["metrics"].items() if k != "n_points"}
 
@@ -34,7 +39,7 @@ def test_a_step_budget_run_twice_gives_identical_metrics_and_seeds_differ(tmp_pa
         assert geometry(a) == geometry(b), family
         if family != "grid_sdf":  # built, not trained: no steps, and the seed only moves the eval samples
             assert a["fit"]["budget"] == "steps" and a["fit"]["steps"] == 15 and a["fit"]["epochs"] > 0
-            assert a["fit"]["loss_curve"] == b["fit"]["loss_curve"]
+            assert losses(a) == losses(b)
             assert [p["chamfer_l2"] for p in a["fit"]["probes"]] == [p["chamfer_l2"] for p in b["fit"]["probes"]]
             # another seed: another sample draw, initialization and batch order
-            assert other["sampling"]["seed"] == 1 and a["fit"]["loss_curve"] != other["fit"]["loss_curve"]
+            assert other["sampling"]["seed"] == 1 and losses(a) != losses(other)
