@@ -5,6 +5,7 @@ Writes, from the run records below the folder:
   <kind>.png, <kind>.pdf           the experiment's plots (ddfbench.report.plots: PLOTS_BY_EXPERIMENT)
   report.md                        the note, the sweep's status (runs done / failed / missing), the
                                    table, the plots, and every record key the table was built from
+  time_to_floor.md, .csv           convergence: time to reach 2x and 5x the noise floor (report.convergence)
   paired.md                        ablation and sampling: paired differences against the baseline setting
                                    on the same seeds (ddfbench.report.paired)
 A report comes from one code commit: records from several commits are refused (exit 2) unless
@@ -23,6 +24,9 @@ import sys
 from collections import Counter
 from typing import Any
 
+import pandas as pd
+
+from ddfbench.report import convergence
 from ddfbench.report.paired import paired_report
 from ddfbench.report.plots import PLOTS, plots_for, write_plots
 from ddfbench.report.tables import summarize, to_csv, to_latex, to_markdown
@@ -81,6 +85,13 @@ def write_report(records_dir: str, out_dir: str, note: str | None = None,
     if pairs is not None:
         with open(os.path.join(out_dir, "paired.md"), "w") as fh:
             fh.write(pairs)
+    extra = [pairs] if pairs is not None else []
+    if experiment == "convergence":
+        rows = convergence.time_to_floor_rows(records)
+        extra.append("## Time to reach the noise floor\n\n" + convergence.to_markdown(rows))
+        with open(os.path.join(out_dir, "time_to_floor.md"), "w") as fh:
+            fh.write(extra[-1])
+        pd.DataFrame(rows).to_csv(os.path.join(out_dir, "time_to_floor.csv"), index=False)
     lines = [f"# {experiment}", ""]
     if note:
         lines += [f"**{note}**", ""]
@@ -88,7 +99,8 @@ def write_report(records_dir: str, out_dir: str, note: str | None = None,
         lines += [f"**Mixed code commits: {', '.join(shas)}: rows may not be comparable.**", ""]
     lines += [f"{len(records)} run records from `{records_dir}` (code: {', '.join(shas) or 'unknown'}).", ""]
     lines += _sweep_lines(records_dir, sweep) + ["", md]
-    lines += ["", pairs] if pairs is not None else []
+    for part in extra:
+        lines += ["", part]
     lines += [f"![{os.path.basename(p)}]({os.path.basename(p)})" for p in written if p.endswith(".png")]
     lines += ["", "Record keys (config hashes) per row:", ""]
     if not df.empty:

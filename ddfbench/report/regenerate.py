@@ -1,11 +1,12 @@
 """`python -m ddfbench.report.regenerate [--only E1,E2] [--results DIR] [--reports DIR] [-- OVERRIDE ...]`
 
 Regenerates the committed reports: for each experiment (default: ablation, sampling, representations,
-storage, render_time, pareto) runs `python -m ddfbench +experiment=<e> out_dir=<results> [OVERRIDE ...]`
+storage, render_time, pareto, convergence) runs `python -m ddfbench +experiment=<e> out_dir=<results> [OVERRIDE ...]`
 (finished runs are skipped, so an interrupted regeneration resumes), then writes
 `python -m ddfbench.report <results>/<e> --out <reports>/<e>`. With overrides the report's first line
 says "reduced budget: <overrides>" (or --note), so a report of a scaled run says how it was scaled.
-The wall time of each sweep is printed and written to <reports>/<e>/wall_time.txt.
+The wall time of each sweep is printed and written to <reports>/<e>/wall_time.txt. Last, the paper
+claims table <reports>/claims.md is rebuilt from every experiment's records (ddfbench.report.claims).
 """
 
 from __future__ import annotations
@@ -17,8 +18,9 @@ import sys
 import time
 
 from ddfbench.report.__main__ import write_report
+from ddfbench.report.claims import write_claims
 
-EXPERIMENTS = ("ablation", "sampling", "representations", "storage", "render_time", "pareto")
+EXPERIMENTS = ("ablation", "sampling", "representations", "storage", "render_time", "pareto", "convergence")
 
 
 def sweep_command(experiment: str, results: str, overrides: list[str]) -> list[str]:
@@ -68,6 +70,8 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     codes = [regenerate(e, args.results, args.reports, overrides, args.note, run=not args.report_only)
              for e in experiments]
+    write_claims(args.results, os.path.join(args.reports, "claims.md"))
+    print(f"claims: {os.path.join(args.reports, 'claims.md')}", flush=True)
     return max(codes, default=0)
 
 
