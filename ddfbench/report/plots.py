@@ -44,6 +44,7 @@ PLOTS_BY_EXPERIMENT: dict[str, tuple[str, ...]] = {
     "pareto": ("pareto", "fit_curves"),
     "smoke": ("fit_curves", "pareto", "sampling", "render_time", "ablation"),
     "convergence": ("convergence", "fit_curves"),
+    "render_matched": ("render_time",),
 }
 DEFAULT_PLOTS = ("fit_curves", "pareto")
 COST_AXES = (("render_warm_s", "warm render time (s)"), ("fit_s", "fit time (s)"), ("storage_bytes", "storage (bytes)"))
