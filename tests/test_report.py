@@ -248,7 +248,7 @@ def test_report_command_writes_parseable_files(tmp_path):
         write_json_atomic(str(tmp_path / "rec" / r["key"] / "record.json"), r)
     out = tmp_path / "rep"
     assert report_main([str(tmp_path / "rec"), "--out", str(out), "--note", "reduced budget: x=1",
-                        "--plots", "fit_curves,pareto,sampling,render_time,ablation"]) == 0
+                        "--plots", ",".join(plots.PLOTS)]) == 0
     report = (out / "report.md").read_text()
     assert report.splitlines()[2] == "**reduced budget: x=1**"
     assert all(r["key"] in report for r in recs)
