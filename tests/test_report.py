@@ -307,3 +307,12 @@ def test_paired_differences_of_the_ablation_against_its_base():
     md = paired.paired_report("ablation", recs)
     assert "| s_fc=10 s_dr=10 s_p=30 | 3 |" in md and "| yes |" in md
     assert paired.paired_report("storage", recs) is None
+
+
+def test_a_report_commit_between_runs_is_not_a_code_change(tmp_path):
+    recs = [make_record(seed=0), make_record(seed=1)]
+    recs[0]["env"] = {"git_sha": "abc", "code_sha": "c0de"}
+    recs[1]["env"] = {"git_sha": "def", "code_sha": "c0de"}  # HEAD moved by a reports-only commit
+    for r in recs:
+        write_json_atomic(str(tmp_path / "rec" / r["key"] / "record.json"), r)
+    assert report_main([str(tmp_path / "rec"), "--out", str(tmp_path / "rep"), "--plots", "none"]) == 0

@@ -57,8 +57,10 @@ class MixedCommits(ValueError):
 
 
 def code_commits(records: list[dict[str, Any]]) -> list[str]:
-    """The distinct env.git_sha of the records ("unknown" where a record has none)."""
-    return sorted({str((r.get("env") or {}).get("git_sha") or "unknown") for r in records})
+    """The distinct code commits of the records: env.code_sha (the last commit that changed the code), else
+    env.git_sha for older records ("unknown" where a record has neither)."""
+    env = [r.get("env") or {} for r in records]
+    return sorted({str(e.get("code_sha") or e.get("git_sha") or "unknown") for e in env})
 
 
 def write_report(records_dir: str, out_dir: str, note: str | None = None,
