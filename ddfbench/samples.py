@@ -32,6 +32,14 @@ class Samples:
     def __len__(self) -> int:
         return int(self.x.shape[0])
 
+    def subset(self, n: int, rng: np.random.Generator) -> "Samples":
+        """n samples drawn without replacement by `rng` (all of them, reordered, when n == len)."""
+        if not 0 < n <= len(self):
+            raise ValueError(f"subset of {n} from {len(self)} samples")
+        idx = np.sort(rng.choice(len(self), size=n, replace=False))
+        pick = lambda a: None if a is None else a[idx]  # noqa: E731
+        return Samples(self.x[idx], pick(self.d), pick(self.t), pick(self.hit), pick(self.sdf), dict(self.meta))
+
     def save_npz(self, path: str) -> None:
         """Write atomically (temporary file, then rename) so a reader never sees half a file."""
         arrays = {k: v for k in ("x", "d", "t", "hit", "sdf") if (v := getattr(self, k)) is not None}
