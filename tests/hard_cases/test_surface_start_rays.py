@@ -23,7 +23,7 @@ from ddfbench.render.counting import CountedTracer
 from ddfbench.representation import Budget, FitData, RayStatus
 from ddfbench.trace import TraceOptions, sphere_trace
 from ddfbench.trace_bench import oracle_sdf_samples
-from tests.hard_cases.conftest import assert_well_formed, compose, has_family, hard_shape, unit
+from tests.hard_cases.conftest import assert_well_formed, backend_params, compose, has_family, hard_shape, unit
 
 RAY_OFFSET = 1e-3  # conf/scene/*.yaml ray_offset: checked below against the scene configs
 FAMILIES = [f for f in ("mesh", "grid_sdf", "neural_sdf", "ddf") if has_family(f)]
@@ -107,11 +107,12 @@ def test_offset_rays_leaving_the_surface_do_not_self_hit(sphere_fits, family):
                                 f"at t < {RAY_OFFSET} (t = {np.sort(shadow.t[near])[:5]})")
 
 
-def test_mesh_rays_started_exactly_on_the_surface(sphere):
+@pytest.mark.parametrize("backend", backend_params("open3d", "warp"))
+def test_mesh_rays_started_exactly_on_the_surface(sphere, backend):
     """BUG (ddfbench/models/mesh.py, MeshFamily.intersect; the oracle's first_hit has no t_near): a ray
     started exactly on a facet reports that facet at t ~ 1e-10 for about half the outward directions
     and a start on the surface going inward stops at t ~ 0 instead of the far side."""
-    rep = load_family("mesh")({"faces": 0})
+    rep = load_family("mesh")({"faces": 0, "backend": backend})
     rep.fit(FitData(None, sphere.mesh, None), Budget())
     mesh = sphere.mesh
     rng = np.random.default_rng(4)
