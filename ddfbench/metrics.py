@@ -14,9 +14,7 @@ import numpy as np
 import trimesh
 from scipy.spatial import cKDTree
 
-# Domain-box diagonal for the default padded box (half-side 0.6): the largest distance two points
-# of the field domain can have. Empty reconstructions get the worst value this allows.
-PENALTY_DISTANCE = float(2 * 0.6 * np.sqrt(3.0))
+from ddfbench.metric_registry import PENALTY_DISTANCE, fscore, penalties
 
 
 def kd_tree(points: np.ndarray) -> cKDTree:
@@ -144,18 +142,12 @@ def distance_metrics(d_gr: np.ndarray, d_rg: np.ndarray, radii: Sequence[float])
 
 
 def penalty_metrics(radii: Sequence[float]) -> dict[str, Any]:
-    """Metrics of an empty or failed reconstruction: the worst values the domain allows, flagged."""
-    worst = PENALTY_DISTANCE
-    side = {"mean": worst**2, "median": worst**2, "p95": worst**2}
-    return {
-        "chamfer_l2": 2 * worst**2,
-        "chamfer_l1": worst,
-        "fscore": {str(r): 0.0 for r in radii},
-        "sided_gt_to_rec": dict(side),
-        "sided_rec_to_gt": dict(side),
-        "normal_consistency": 0.0,
-        "empty_reconstruction": True,
-    }
+    """Metrics of an empty or failed reconstruction: every penalty the metric registry declares
+    (the worst values the domain allows), an F-score penalty per radius, flagged."""
+    out = penalties()
+    out.setdefault("fscore", {}).update({str(r): fscore(float(r)).penalty for r in radii})
+    out["empty_reconstruction"] = True
+    return out
 
 
 def geometry_metrics(

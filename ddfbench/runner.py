@@ -18,6 +18,7 @@ import numpy as np
 import torch
 
 from ddfbench import runs
+from ddfbench.budget import fit_limit, fit_record
 from ddfbench.errors import InputError
 from ddfbench.metrics import cloud_metrics, geometry_metrics, penalty_metrics, sample_surface
 from ddfbench.models import load_family
@@ -76,15 +77,24 @@ def _stages(cfg: Mapping[str, Any], rdir: str, device: str, seed: int, out: dict
     cache_dir = os.path.join(cfg.get("out_dir", "results"), ".cache", "datasets")
     kind = Family.sample_kind or "rays"
     samples, dataset_path, info = sampling.build(shape, oracle, dict(cfg["sampling"]), kind, seed, cache_dir)
+    ev, tr = cfg["eval"], cfg["train"]
+    if tr.get("n_labels"):  # matched label counts: a seeded subset of what the strategy produced
+        want = int(tr["n_labels"])
+        if want > len(samples):
+            raise InputError(f"train.n_labels={want}: sampling={cfg['sampling']['strategy']} gave only "
+                             f"{len(samples)} labels on {shape.name} (raise its sample size or lower n_labels)")
+        info = dict(info, n_generated=len(samples), n_samples=want)
+        samples = samples.subset(want, np.random.default_rng(seed + 11))
     out["sampling"] = {**dict(cfg["sampling"]), **info}
     cost["sampling_s"] = float(info.get("sampling_s", 0.0))
     artifacts["dataset"] = os.path.relpath(dataset_path, rdir)
 
-    ev, tr = cfg["eval"], cfg["train"]
     radii = [float(r) for r in ev["radii"]]
     domain = float(cfg.get("domain", 0.6))
     rep = Family(dict(cfg["model"]), domain=domain)
-    budget = Budget(max_steps=int(tr["max_steps"]), max_seconds=float(tr["max_seconds"]), device=device,
+    n_labels = info.get("n_samples")
+    limit = fit_limit(tr, cfg["model"], n_labels)
+    budget = Budget(max_steps=limit.max_steps, max_seconds=limit.max_seconds, device=device,
                     seed=seed, n_probes=int(tr.get("n_probes", 5)))
     gt_probe_points = sample_surface(shape.mesh, int(tr.get("probe_points", 5000)), seed + 7)[0]
     probe_res = min(int(tr.get("probe_resolution", 48)), int(ev["mesh_resolution"]))
@@ -94,7 +104,8 @@ def _stages(cfg: Mapping[str, Any], rdir: str, device: str, seed: int, out: dict
     cost["fit_wall_s"] = time.perf_counter() - t0
     cost["fit_s"] = float(stats.seconds)
     out["fit"] = {"steps": stats.steps, "seconds": stats.seconds, "loss_curve": stats.loss_curve,
-                  "probes": stats.probes, "status": stats.status, "message": stats.message, **stats.extra}
+                  "probes": stats.probes, "status": stats.status, "message": stats.message, **stats.extra,
+                  **fit_record(limit, stats.extra.get("stop"), stats.steps, cfg["model"], n_labels)}
     if stats.status != "ok":
         raise StageFailed(f"fit of {Family.family} failed: {stats.message}")
 

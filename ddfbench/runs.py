@@ -101,13 +101,25 @@ def find_records(root: str) -> list[dict[str, Any]]:
     return sorted(out, key=lambda r: (r.get("experiment", ""), r.get("key", "")))
 
 
-def _git_sha() -> str | None:
+CODE_PATHS = ("ddfbench", "conf", "pyproject.toml")  # what a result depends on (reports/, README do not count)
+
+
+def _git(*args: str) -> str | None:
     try:
-        here = os.path.dirname(os.path.abspath(__file__))
-        out = subprocess.run(["git", "rev-parse", "HEAD"], cwd=here, capture_output=True, text=True, timeout=5)
+        root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+        out = subprocess.run(["git", *args], cwd=root, capture_output=True, text=True, timeout=5)
         return out.stdout.strip() or None
     except (OSError, subprocess.SubprocessError):
         return None
+
+
+def _git_sha() -> str | None:
+    return _git("rev-parse", "HEAD")
+
+
+def _code_sha() -> str | None:
+    """The last commit that changed the code (CODE_PATHS): committing reports midway leaves it unchanged."""
+    return _git("log", "-1", "--format=%H", "--", *CODE_PATHS)
 
 
 def environment(device: str, threads: int) -> dict[str, Any]:
@@ -120,6 +132,7 @@ def environment(device: str, threads: int) -> dict[str, Any]:
     gpu = torch.cuda.get_device_name(0) if device.startswith("cuda") and torch.cuda.is_available() else None
     return {
         "git_sha": _git_sha(),
+        "code_sha": _code_sha(),
         "versions": {"python": platform.python_version(), "torch": torch.__version__, "numpy": numpy.__version__,
                      "trimesh": trimesh.__version__, "open3d": open3d.__version__},
         "device": device,

@@ -18,6 +18,8 @@ class Samples:
     d:   (N, 3) float32 unit directions, or None for SDF-only samples.
     t:   (N,) float32 first-hit distance along d; inf for a miss (use `hit`, never t, in losses).
     hit: (N,) bool, t is finite.
+    line_hit: (N,) bool, the whole line through x along d meets the surface (on either side of x; True
+         wherever hit is), or None. Every ray sampler supplies it (sampling.build, exact by the oracle).
     sdf: (N,) float32 signed distance (negative inside), or None.
     meta: strategy parameters and counts (rejections, timings), JSON-serializable.
     """
@@ -26,15 +28,24 @@ class Samples:
     d: np.ndarray | None = None
     t: np.ndarray | None = None
     hit: np.ndarray | None = None
+    line_hit: np.ndarray | None = None
     sdf: np.ndarray | None = None
     meta: dict[str, Any] = field(default_factory=dict)
 
     def __len__(self) -> int:
         return int(self.x.shape[0])
 
+    def subset(self, n: int, rng: np.random.Generator) -> "Samples":
+        """n samples drawn without replacement by `rng` (all of them, reordered, when n == len)."""
+        if not 0 < n <= len(self):
+            raise ValueError(f"subset of {n} from {len(self)} samples")
+        idx = np.sort(rng.choice(len(self), size=n, replace=False))
+        pick = lambda a: None if a is None else a[idx]  # noqa: E731
+        return Samples(self.x[idx], pick(self.d), pick(self.t), pick(self.hit), pick(self.sdf), dict(self.meta))
+
     def save_npz(self, path: str) -> None:
         """Write atomically (temporary file, then rename) so a reader never sees half a file."""
-        arrays = {k: v for k in ("x", "d", "t", "hit", "sdf") if (v := getattr(self, k)) is not None}
+        arrays = {k: v for k in ("x", "d", "t", "hit", "line_hit", "sdf") if (v := getattr(self, k)) is not None}
         arrays["meta"] = np.array(json.dumps(self.meta))
         tmp = f"{path}.tmp{os.getpid()}.npz"
         np.savez(tmp, **arrays)
@@ -45,4 +56,4 @@ class Samples:
         with np.load(path, allow_pickle=False) as z:
             get = lambda k: z[k] if k in z.files else None  # noqa: E731
             meta = json.loads(str(z["meta"])) if "meta" in z.files else {}
-            return Samples(x=z["x"], d=get("d"), t=get("t"), hit=get("hit"), sdf=get("sdf"), meta=meta)
+            return Samples(x=z["x"], d=get("d"), t=get("t"), hit=get("hit"), line_hit=get("line_hit"), sdf=get("sdf"), meta=meta)

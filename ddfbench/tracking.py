@@ -21,7 +21,6 @@ import logging
 import math
 import os
 import re
-from pathlib import Path
 from typing import Any, Iterator, Mapping
 
 log = logging.getLogger(__name__)
@@ -108,16 +107,17 @@ def _logged_run(client: Any, experiment_id: str, record: Mapping[str, Any]) -> b
     return any(r.data.tags.get("status") == record.get("status") for r in found)
 
 
-def _experiment_id(client: Any, name: str, uri: str) -> str:
-    """The experiment's id, created where missing. A SQLite store keeps its artifacts in mlartifacts/
-    beside the database (MLflow's default is ./mlruns under whatever folder the run started in)."""
+def artifact_root(uri: str) -> str | None:
+    """Where a SQLite store keeps its artifacts: `mlartifacts/` beside the database (MLflow's own
+    default is ./mlruns in the working directory); None for a server, which decides itself."""
+    if not uri.startswith("sqlite:///"):
+        return None
+    return "file://" + os.path.join(os.path.dirname(os.path.abspath(uri[len("sqlite:///"):])), "mlartifacts")
+
+
+def _experiment_id(client: Any, uri: str, name: str) -> str:
     exp = client.get_experiment_by_name(name)
-    if exp is not None:
-        return exp.experiment_id
-    location = None
-    if uri.startswith("sqlite:///"):
-        location = Path(uri[len("sqlite:///"):]).parent.joinpath("mlartifacts").as_uri()
-    return client.create_experiment(name, artifact_location=location)
+    return exp.experiment_id if exp is not None else client.create_experiment(name, artifact_location=artifact_root(uri))
 
 
 def _artifacts(client: Any, run_id: str, run_dir: str, record: Mapping[str, Any]) -> None:
@@ -143,7 +143,7 @@ def log_record(uri: str, record: Mapping[str, Any], run_dir: str) -> str | None:
     from mlflow.tracking import MlflowClient
 
     client = MlflowClient(tracking_uri=uri)
-    experiment_id = _experiment_id(client, str(record.get("experiment", "single")), uri)
+    experiment_id = _experiment_id(client, uri, str(record.get("experiment", "single")))
     if _logged_run(client, experiment_id, record):
         return None
     run = client.create_run(experiment_id, tags=record_tags(record))

@@ -34,9 +34,9 @@ def swept(job):
     return dict(o.split("=", 1) for o in job.swept)
 
 
-@pytest.mark.parametrize("experiment,n_jobs", [("ablation", 7), ("ablation_grid", 27), ("sampling", 12),
-                                               ("representations", 32), ("storage", 24), ("pareto", 24),
-                                               ("render_time", 21), ("smoke", 18)])
+@pytest.mark.parametrize("experiment,n_jobs", [("ablation", 21), ("ablation_grid", 81), ("sampling", 36),
+                                               ("representations", 160), ("storage", 72), ("pareto", 72),
+                                               ("render_time", 63), ("smoke", 18)])
 def test_experiment_expands_to_its_documented_grid(experiment, n_jobs, tmp_path):
     jobs = grid(experiment)
     assert len(jobs) == n_jobs
@@ -56,8 +56,8 @@ def test_ablation_is_one_factor_at_a_time_and_shares_records_with_the_grid(tmp_p
 
 def test_budget_overrides_and_seeds_change_the_grid(tmp_path):
     base = grid("sampling")
-    scaled = grid("sampling", "train.max_seconds=5", "seed=0,1")
-    assert len(scaled) == 2 * len(base)
+    scaled = grid("sampling", "train.max_steps=5", "seed=0,1,2,3")
+    assert len(scaled) == len(base) // 3 * 4
     assert not {j.key for j in base} & {j.key for j in scaled}  # a budget is part of the record key
 
 
@@ -68,8 +68,8 @@ def test_capacity_sweeps_cover_every_family(tmp_path):
 
 
 @pytest.mark.parametrize("experiment", ["storage", "pareto"])
-def test_gan_sdf_levels_set_its_fit_budget_and_others_keep_the_experiments(experiment):
-    """gan_sdf's network is fixed: its capacity level is train.max_seconds, taken from the level's row."""
+def test_gan_sdf_levels_set_its_fit_steps_and_others_keep_their_models(experiment):
+    """gan_sdf's network is fixed: its capacity level is train.max_steps, taken from the level's row."""
     from hydra import compose, initialize_config_dir
 
     with initialize_config_dir(CONF_DIR, version_base="1.3"):
@@ -78,10 +78,36 @@ def test_gan_sdf_levels_set_its_fit_budget_and_others_keep_the_experiments(exper
                                                 f"+experiment={experiment}"])
         levels = ("c1", "c2", "c3", "c4")
         gan = {lv: composed("gan_sdf", lv) for lv in levels}
-        ddf = {composed("ddf", lv).train.max_seconds for lv in levels}
-    budgets = [gan[lv].train.max_seconds for lv in levels]
-    assert budgets == [gan[lv].capacities.gan_sdf[lv].max_seconds for lv in levels]
+        ddf = {(c := composed("ddf", lv)).train.max_steps: c.model.fit_steps for lv in levels}
+    budgets = [gan[lv].train.max_steps for lv in levels]
+    assert budgets == [gan[lv].capacities.gan_sdf[lv].max_steps for lv in levels]
     assert len(set(budgets)) == 4 and len(ddf) == 1  # the bug this guards against: one budget for all levels
+    assert list(ddf.items())[0][0] == list(ddf.items())[0][1]  # other families: their model's fit_steps
+
+
+SEEDS = {"representations": 5, "ablation": 3, "ablation_grid": 3, "sampling": 3, "storage": 3, "pareto": 3,
+         "render_time": 3}
+
+
+@pytest.mark.parametrize("experiment,n_seeds", SEEDS.items())
+def test_experiments_fix_the_work_and_sweep_seeds(experiment, n_seeds):
+    """Every committed experiment: >= 3 seeds (5 for representations) and a steps or epochs budget."""
+    from hydra import compose, initialize_config_dir
+
+    assert len({swept(j)["seed"] for j in grid(experiment)}) == n_seeds
+    with initialize_config_dir(CONF_DIR, version_base="1.3"):
+        cfg = compose("config", overrides=[f"+experiment={experiment}"])
+    assert cfg.train.budget in ("steps", "epochs")
+
+
+def test_sampling_fits_matched_label_counts_per_level():
+    from hydra import compose, initialize_config_dir
+
+    with initialize_config_dir(CONF_DIR, version_base="1.3"):
+        labels = {(strategy, size): compose("config", overrides=[
+            f"+experiment/strategy={strategy}", f"sample_size={size}", "+experiment=sampling"]).train.n_labels
+            for strategy in ("random", "pov", "surface") for size in ("xs", "l")}
+    assert labels == {(s, z): n for s in ("random", "pov", "surface") for z, n in (("xs", 10000), ("l", 640000))}
 
 
 def test_smoke_runs_every_family_and_strategy_and_reports(tmp_path):

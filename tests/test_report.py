@@ -114,19 +114,65 @@ def test_failed_and_missing_seeds_are_flagged_not_hidden():
     assert "NaN loss" in md and "fewer ok runs" in md
 
 
+def seeded(shape, width, chamfer, spread=0.01):
+    """Three seeds of one configuration, chamfer * (1 - spread, 1, 1 + spread)."""
+    return [make_record(shape=shape, width=width, seed=s, chamfer=chamfer * (1 + spread * (s - 1))) for s in (0, 1, 2)]
+
+
 def test_best_is_marked_per_shape_and_per_direction():
-    recs = [make_record(shape="bunny", width=w, chamfer=c) for w, c in ((64, 3e-3), (128, 1e-3))]
-    recs += [make_record(shape="cow", width=w, chamfer=c) for w, c in ((64, 2e-3), (128, 4e-3))]
+    recs = seeded("bunny", 64, 3e-3) + seeded("bunny", 128, 1e-3) + seeded("cow", 64, 2e-3) + seeded("cow", 128, 4e-3)
     df = tables.summarize(recs)
     best = tables.best_mask(df, "chamfer_l2")
     winners = {(r["shape"], r["model.width"]) for (_, r), b in zip(df.iterrows(), best) if b}
     assert winners == {("bunny", "128"), ("cow", "64")}
     df.loc[:, "fscore@0.01_mean"] = [0.1, 0.9, 0.8, 0.2]
+    df.loc[:, "fscore@0.01_ci_lo"] = df["fscore@0.01_mean"] - 0.01
+    df.loc[:, "fscore@0.01_ci_hi"] = df["fscore@0.01_mean"] + 0.01
     high = {(r["shape"], r["model.width"]) for (_, r), b in zip(df.iterrows(), tables.best_mask(df, "fscore@0.01")) if b}
     assert high == {("bunny", "128"), ("cow", "64")}
     lines = [line.strip("|").split(" | ") for line in tables.to_markdown(df).splitlines() if line.startswith("| ")]
     col = [c.strip() for c in lines[0]].index("CD-L2 ×10³")
-    assert [row[col].strip() for row in lines[1:5]] == ["3", "**1**", "**2**", "4"]  # x10^3, winners in bold
+    assert [row[col].strip().split(" ±")[0] for row in lines[1:5]] == ["3", "**1", "**2", "4"]  # x10^3, bold winners
+
+
+def test_overlapping_intervals_are_ties_not_bold():
+    """Means 1.00 and 1.05 (×10⁻³) with a 10 % seed spread: the t intervals overlap, so no bold; both tied,
+    the separated third row is not. Shrinking the spread separates them and the best turns bold."""
+    recs = seeded("bunny", 64, 1.05e-3, 0.1) + seeded("bunny", 128, 1.0e-3, 0.1) + seeded("bunny", 256, 9e-3, 0.1)
+    df = tables.summarize(recs)
+    assert list(tables.marks(df, "chamfer_l2")) == ["tie", "tie", ""]
+    assert (df["chamfer_l2_ci_lo"] < df["chamfer_l2_mean"]).all() and (df["chamfer_l2_mean"] < df["chamfer_l2_ci_hi"]).all()
+    md = tables.to_markdown(df).split("\n\n")[0]
+    assert "**" not in md.split("CD-L1")[0] and md.count(tables.TIE) >= 2
+    sharp = seeded("bunny", 64, 1.05e-3, 0.001) + seeded("bunny", 128, 1.0e-3, 0.001)
+    assert list(tables.marks(tables.summarize(sharp), "chamfer_l2")) == ["", "best"]
+
+
+def test_ci_is_a_t_interval_over_seeds():
+    from scipy import stats as sps
+
+    recs = [make_record(seed=s, chamfer=c) for s, c in zip((0, 1, 2, 3), (1e-3, 2e-3, 4e-3, 3e-3))]
+    row = tables.summarize(recs).iloc[0]
+    half = sps.t.ppf(0.975, 3) * np.std([1, 2, 4, 3], ddof=1) / 2 * 1e-3
+    assert row["chamfer_l2_ci_hi"] - row["chamfer_l2_mean"] == pytest.approx(half)
+    assert row["chamfer_l2_mean"] - row["chamfer_l2_ci_lo"] == pytest.approx(half)
+
+
+def test_a_new_metric_declaration_reaches_the_table_with_its_empty_penalty(monkeypatch):
+    from ddfbench import metric_registry
+    from ddfbench.metrics import penalty_metrics
+
+    new = metric_registry.Metric("hausdorff", ("metrics", "hausdorff"), "Hausdorff ×10³", 1e3, penalty=7.5)
+    monkeypatch.setattr(metric_registry, "METRICS", [*metric_registry.METRICS, new])
+    empty = penalty_metrics([0.01])
+    assert empty["hausdorff"] == 7.5 and empty["empty_reconstruction"]
+    recs = [make_record(width=64), make_record(width=128)]
+    recs[0]["metrics"]["hausdorff"] = 0.002
+    recs[1]["metrics"] = {**empty, "noise_floor": recs[1]["metrics"]["noise_floor"]}
+    df = tables.summarize(recs)
+    assert sorted(df["hausdorff_mean"]) == [0.002, 7.5]
+    md = tables.to_markdown(df)
+    assert "Hausdorff ×10³" in md and "| 7500 ≈ |" in md and "| 2 ≈ |" in md  # n = 1: tied
 
 
 def test_noise_floor_is_its_own_row_per_shape():
@@ -202,7 +248,7 @@ def test_report_command_writes_parseable_files(tmp_path):
         write_json_atomic(str(tmp_path / "rec" / r["key"] / "record.json"), r)
     out = tmp_path / "rep"
     assert report_main([str(tmp_path / "rec"), "--out", str(out), "--note", "reduced budget: x=1",
-                        "--plots", "fit_curves,pareto,sampling,render_time,ablation"]) == 0
+                        "--plots", ",".join(plots.PLOTS)]) == 0
     report = (out / "report.md").read_text()
     assert report.splitlines()[2] == "**reduced budget: x=1**"
     assert all(r["key"] in report for r in recs)
@@ -232,3 +278,41 @@ def test_equal_values_are_not_marked_and_empty_reconstructions_are_counted():
     assert sorted(df["n_empty"]) == [0, 1]
     md = tables.to_markdown(df)
     assert "**" not in md.split("\n\n")[0] and "1 (1 empty)" in md and "defined penalty" in md
+
+
+def test_records_from_mixed_commits_are_refused_unless_allowed(tmp_path):
+    recs = [make_record(seed=0), make_record(seed=1)]
+    recs[1]["env"] = {"git_sha": "def"}
+    for r in recs:
+        write_json_atomic(str(tmp_path / "rec" / r["key"] / "record.json"), r)
+    out = tmp_path / "rep"
+    assert report_main([str(tmp_path / "rec"), "--out", str(out), "--plots", "none"]) == 2
+    assert not (out / "table.md").exists()
+    assert report_main([str(tmp_path / "rec"), "--out", str(out), "--plots", "none", "--allow-mixed-commits"]) == 0
+    assert "Mixed code commits: abc, def" in (out / "report.md").read_text()
+
+
+def test_paired_differences_of_the_ablation_against_its_base():
+    from ddfbench.report import paired
+
+    base = {"strategy": "surface", "s_fc": 10, "s_dr": 10, "s_p": 10}
+    recs = [make_record(seed=s, sampling=base, chamfer=1e-3 + 1e-5 * s) for s in (0, 1, 2)]
+    recs += [make_record(seed=s, sampling=base | {"s_p": 30}, chamfer=5e-4 + 1e-5 * s + 1e-6 * s * s) for s in (0, 1, 2)]
+    recs += [make_record(seed=5, sampling=base | {"s_p": 30}, chamfer=1.0)]  # no partner seed: not paired
+    for r in recs:
+        r["experiment"] = "ablation"
+    (row,) = paired.compare_settings(recs, "chamfer_l2", paired.surface_levels, "s_fc=10 s_dr=10 s_p=10")
+    assert row["setting"] == "s_fc=10 s_dr=10 s_p=30" and row["diff"].n == 3
+    assert row["diff"].mean == pytest.approx(-5e-4 + 5e-6 / 3) and row["diff"].hi < 0
+    md = paired.paired_report("ablation", recs)
+    assert "| s_fc=10 s_dr=10 s_p=30 | 3 |" in md and "| yes |" in md
+    assert paired.paired_report("storage", recs) is None
+
+
+def test_a_report_commit_between_runs_is_not_a_code_change(tmp_path):
+    recs = [make_record(seed=0), make_record(seed=1)]
+    recs[0]["env"] = {"git_sha": "abc", "code_sha": "c0de"}
+    recs[1]["env"] = {"git_sha": "def", "code_sha": "c0de"}  # HEAD moved by a reports-only commit
+    for r in recs:
+        write_json_atomic(str(tmp_path / "rec" / r["key"] / "record.json"), r)
+    assert report_main([str(tmp_path / "rec"), "--out", str(tmp_path / "rep"), "--plots", "none"]) == 0

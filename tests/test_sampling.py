@@ -68,6 +68,21 @@ def test_ray_labels_agree_with_second_backend(cow, rng, tmp_path, strategy, over
     assert info["n_samples"] == len(samples) and info["memory_bytes"] > 0 and info["sampling_s"] > 0
 
 
+@pytest.mark.parametrize("strategy,overrides", [("surface", {"s_dr": 4, "s_p": 4}), ("random", {"n_samples": 20000}),
+                                                 ("pov", {"resolution": 24}), ("pov", {"resolution": 16, "s_p": 3})])
+def test_every_ray_sampler_labels_whole_lines_exactly(sphere, tmp_path, strategy, overrides):
+    """line_hit: the line through x along d meets the sphere (|x - (x.d) d| <= radius), for every strategy,
+    with both kinds present, true wherever the ray hits, and kept by the cache."""
+    samples, path, info = build(sphere, Oracle(sphere.mesh), config(strategy, **overrides), "rays", 0, str(tmp_path))
+    x, d = samples.x.astype(np.float64), samples.d.astype(np.float64)
+    gap = np.linalg.norm(x - np.einsum("ij,ij->i", x, d)[:, None] * d, axis=1) - 0.5
+    clear = np.abs(gap) > 0.01  # away from the tessellated sphere's tangent lines
+    assert np.array_equal(samples.line_hit[clear], gap[clear] < 0)
+    assert np.all(samples.line_hit[samples.hit])
+    assert 100 < (~samples.line_hit).sum() == info["n_line_miss"] and samples.line_hit.sum() > 100
+    assert np.array_equal(Samples.load_npz(path).line_hit, samples.line_hit)
+
+
 def test_surface_rejects_rays_into_the_mesh_and_occluded_ones(cow, tmp_path):
     cfg = config("surface", face_mode="per_face", s_fc=1, s_dr=4, s_p=4, perpendicular=False)
     samples, _, info = build(cow, Oracle(cow.mesh), cfg, "rays", 0, str(tmp_path))

@@ -39,10 +39,10 @@ def test_mesh_run_is_logged_with_tags_metrics_and_artifacts(tmp_path):
     assert run.data.metrics["chamfer_l2"] == pytest.approx(rec["metrics"]["chamfer_l2"])
     assert run.data.metrics["storage_bytes"] == rec["cost"]["storage_bytes"]
     assert run.data.params["model.family"] == "mesh"
+    assert run.info.artifact_uri.startswith(f"file://{tmp_path}/mlartifacts/")  # beside the store, not ./mlruns
     top = {a.path for a in client.list_artifacts(run.info.run_id)}
     assert {"record.json", "renders"} <= top
     assert any(a.path.endswith(".png") for a in client.list_artifacts(run.info.run_id, "renders"))
-    assert run.info.artifact_uri.startswith((tmp_path / "mlartifacts").as_uri())  # beside the db, not ./mlruns
 
 
 def test_learned_run_has_a_probe_history_over_fit_time(tmp_path):

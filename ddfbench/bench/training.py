@@ -21,7 +21,7 @@ from ddfbench.bench.results import Row, SectionResult, compare
 from ddfbench.bench.timing import measure, once, precisions
 from ddfbench.models import load_family
 from ddfbench.representation import Budget, FitData
-from ddfbench.sampling import surface
+from ddfbench.sampling import line_hits, surface
 
 
 def batch_size(rep, stats) -> int:
@@ -68,8 +68,10 @@ def family_rows(ctx: Context, family: str, samples_by_kind: dict, details: dict)
     Family = load_family(family)
     kind = Family.sample_kind or "rays"
     if kind not in samples_by_kind:
-        samples_by_kind[kind] = surface.sample(shape, oracle, preset("sampling", "surface"), kind,
-                                               np.random.default_rng(0))[0]
+        got = surface.sample(shape, oracle, preset("sampling", "surface"), kind, np.random.default_rng(0))[0]
+        if kind == "rays":  # as sampling.build gives them to a run
+            got.line_hit = line_hits(oracle, got.x, got.d, got.hit)
+        samples_by_kind[kind] = got
     samples, rows = samples_by_kind[kind], []
     for prec in (p for p in precisions(ctx.device) if p != "bf16"):  # no family trains in bf16
         kw = dict(device=ctx.device, precision=prec)

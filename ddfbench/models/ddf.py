@@ -24,8 +24,8 @@ cfg keys (conf/model/ddf.yaml documents each):
   heads     visibility ("head": a logit trained with cross entropy | "clamp": no head,
             hit where the clamped distance stays below clamp_hit_ratio * delta, as in the paper)
   loss      loss ("l1" | "clamp" with delta), vis_weight, entry_share (share of each batch drawn
-            from line_entry_labels, visibility only, half hits and half misses; none unless the
-            samples give both), batch_size, lr, weight_decay,
+            from line_entry_labels of up to MAX_ENTRY_LINES sample lines, visibility only, half hits
+            and half misses; none unless the samples carry line_hit and it has both), batch_size, lr, weight_decay,
             lr_schedule / lr_final_ratio / lr_warmup (ddfbench.train.Schedule), grad_clip
   mesh      mesh_field ("signed" | "udf"); signed: mesh_directions (K on the coarsest lattice),
             mesh_keep (lines per finer node), mesh_band (truncation, unit-cube units), mesh_rank
@@ -71,6 +71,7 @@ DEFAULTS: dict[str, Any] = {
 # 65k rays): forward with grad 0.33-0.44 s, backward 0.35-0.41 s, so one pass wins above a share of
 # about backward / (forward + backward) = 0.5.
 ONE_PASS_HIT_SHARE = 0.5
+MAX_ENTRY_LINES = 1 << 22  # sample lines drawn (seeded) for the entry labels: 4M lines, 100 MB
 _CHOICES = {"activation": ("relu", "softplus"), "direction": ("vector", "angles"), "param": ("point", "ray"),
             "visibility": ("head", "clamp"), "loss": ("l1", "clamp"), "storage_dtype": ("float32", "float16"),
             "mesh_field": ("signed", "udf")}
@@ -132,24 +133,16 @@ def line_vote(s: np.ndarray, keep: int, band: float, rank: int) -> tuple[np.ndar
     return value.astype(np.float32), order
 
 
-def line_entry_labels(x: np.ndarray, d: np.ndarray, hit: np.ndarray, half: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def line_entry_labels(x: np.ndarray, d: np.ndarray, line_hit: np.ndarray, half: float,
+                      rows: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Exact visibility labels where sample lines enter the box [-half, half]^3, the queries intersect
-    and to_mesh make. From rays x (N,3), unit d (N,3), hit (N,) bool:
-    a hit ray still hits from its line's entry (whatever lies between, the line meets the surface);
-    a point with misses along both d and -d (the surface sampler's perpendicular pairs) lies on a
-    line that misses entirely, so both its ends are misses.
+    and to_mesh make: the samples' rows (M,) of x (N,3), unit d (N,3) and line_hit (N,) bool (whether
+    the whole line meets the surface, Samples.line_hit), moved back along -d to the box boundary.
     Returns (entry points (M,3) float32, directions (M,3) float32, hit (M,) bool).
     """
-    miss = np.flatnonzero(~hit)
-    flip = d[miss, 0] < 0  # one direction per line: the two rays of a pair share it
-    line = np.concatenate([x[miss], np.where(flip[:, None], -d[miss], d[miss])], 1).astype(np.float32)
-    _, inverse, count = np.unique(np.ascontiguousarray(line).view(np.dtype((np.void, 24))).ravel(),
-                                  return_inverse=True, return_counts=True)
-    pairs = miss[count[inverse.ravel()] == 2]
-    rows = np.r_[np.flatnonzero(hit), pairs]
     xs, ds = np.asarray(x[rows], np.float32), np.asarray(d[rows], np.float32)
     back = box_entry(xs, -ds, half)[1]
-    return xs - back[:, None] * ds, ds, np.asarray(hit[rows], bool)
+    return xs - back[:, None] * ds, ds, np.asarray(line_hit[rows], bool)
 
 
 class PositionalEncoding(nn.Module):
@@ -450,7 +443,10 @@ class DDF(Representation):
         cfg, n = self.cfg, len(s)
         gen = torch.Generator(device=dev).manual_seed(int(budget.seed))
         delta = float(cfg["delta"])
-        xe, de, he = (torch.as_tensor(a, device=dev) for a in line_entry_labels(s.x, s.d, s.hit, self.domain))
+        lines = np.zeros(0, np.int64) if s.line_hit is None else \
+            np.random.default_rng(int(budget.seed)).choice(n, min(n, MAX_ENTRY_LINES), replace=False)
+        line_hit = s.hit if s.line_hit is None else s.line_hit  # no line labels: no rows either
+        xe, de, he = (torch.as_tensor(a, device=dev) for a in line_entry_labels(s.x, s.d, line_hit, self.domain, lines))
         n_hit_entries = int(he.sum())
         both = 0 < n_hit_entries < len(he)  # one class alone would only bias the head: then none
         n_entry = 2 * int(round(float(cfg["entry_share"]) * int(cfg["batch_size"]) / 2)) if both and cfg["visibility"] == "head" else 0

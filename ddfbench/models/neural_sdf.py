@@ -12,7 +12,9 @@ Losses on a batch of SDF samples (x, s) (sample_kind "sdf"):
   w_sdf      * mean |clamp(f(x), -delta, delta) - clamp(s, -delta, delta)|   (DeepSDF, delta 0.1;
                see clamped_l1 for where its gradient would vanish)
   w_surface  * mean |f(x)| over the batch's samples with |s| <= surface_tol
-  w_eikonal  * mean | ||grad f(y)|| - 1 |, y = the batch points and as many uniform box points
+  w_eikonal  * mean | ||grad f(y)|| - 1 |, y = as many points uniform in the field box as the batch
+               (everywhere, not only near the surface: far from the samples it keeps f from
+               dipping below zero, which larger networks did as floating surfaces)
 Normals of hits: autograd, one batched backward pass (counted per point).
 Artifact: one torch file {"header": JSON config, "state_dict": ...}, read with weights_only=True.
 """
@@ -146,7 +148,7 @@ class NeuralSDF(NetSDFFamily):
                     loss = loss + w_surf * pred[on_surface].abs().mean()
             if w_eik:
                 uniform = (torch.rand_like(xb) * 2 - 1) * self.domain
-                loss = loss + w_eik * eikonal_residual(net, torch.cat([xb, uniform]))
+                loss = loss + w_eik * eikonal_residual(net, uniform)
             return loss
 
         optimizer = torch.optim.Adam(net.parameters(), lr=float(self.cfg.get("lr", 1e-3)))

@@ -6,8 +6,15 @@ Writes, from the run records below the folder:
   gallery.png                      renders beside the oracle's, error maps, meshes (ddfbench.report.gallery)
   report.md                        the note, the sweep's status (runs done / failed / missing), the
                                    table, the plots, and every record key the table was built from
+  time_to_floor.md, .csv           convergence: time to reach 2x and 5x the noise floor (report.convergence)
+  paired.md                        ablation and sampling: paired differences against the baseline setting
+                                   on the same seeds (ddfbench.report.paired)
+A report comes from one code commit: records from several commits are refused (exit 2) unless
+--allow-mixed-commits, which names the commits at the top of report.md.
 `--status [OVERRIDE ...]` prints which runs of the sweep are done, failed or missing instead
 (ddfbench.report.status).
+`--claims RESULTS [--out reports/claims.md]` writes the paper-claims table from the records of every
+experiment below RESULTS (ddfbench.report.claims).
 """
 
 from __future__ import annotations
@@ -18,7 +25,11 @@ import sys
 from collections import Counter
 from typing import Any
 
+import pandas as pd
+
+from ddfbench.report import convergence
 from ddfbench.report.gallery import write_gallery
+from ddfbench.report.paired import paired_report
 from ddfbench.report.plots import PLOTS, plots_for, write_plots
 from ddfbench.report.tables import summarize, to_csv, to_latex, to_markdown
 from ddfbench.runs import find_records
@@ -43,10 +54,27 @@ def _sweep_lines(records_dir: str, sweep: list[str] | None) -> list[str]:
     return ["```", status.format_status(records_dir, st), "```"]
 
 
+class MixedCommits(ValueError):
+    """Records of one report come from more than one code commit."""
+
+
+def code_commits(records: list[dict[str, Any]]) -> list[str]:
+    """The distinct code commits of the records: env.code_sha (the last commit that changed the code), else
+    env.git_sha for older records ("unknown" where a record has neither)."""
+    env = [r.get("env") or {} for r in records]
+    return sorted({str(e.get("code_sha") or e.get("git_sha") or "unknown") for e in env})
+
+
 def write_report(records_dir: str, out_dir: str, note: str | None = None,
-                 kinds: tuple[str, ...] | None = None, sweep: list[str] | None = None) -> str:
-    """Write the tables, plots and report.md for the records below records_dir; return the markdown table."""
+                 kinds: tuple[str, ...] | None = None, sweep: list[str] | None = None,
+                 allow_mixed_commits: bool = False) -> str:
+    """Write the tables, plots and report.md for the records below records_dir; return the markdown table.
+    Raises MixedCommits when the records come from several code commits (unless allowed)."""
     records = find_records(records_dir)
+    shas = code_commits(records)
+    if len(shas) > 1 and not allow_mixed_commits:
+        raise MixedCommits(f"{records_dir}: records from {len(shas)} code commits ({', '.join(shas)}); rerun them "
+                           "on one commit or pass --allow-mixed-commits")
     df = summarize(records)
     os.makedirs(out_dir, exist_ok=True)
     md = to_markdown(df)
@@ -59,12 +87,26 @@ def write_report(records_dir: str, out_dir: str, note: str | None = None,
     written = write_plots(records, out_dir, kinds if kinds is not None else plots_for(experiment))
     gallery = write_gallery(records, out_dir, caption=note)
     written += [gallery] if gallery else []
+    pairs = paired_report(experiment, records)
+    if pairs is not None:
+        with open(os.path.join(out_dir, "paired.md"), "w") as fh:
+            fh.write(pairs)
+    extra = [pairs] if pairs is not None else []
+    if experiment == "convergence":
+        rows = convergence.time_to_floor_rows(records)
+        extra.append("## Time to reach the noise floor\n\n" + convergence.to_markdown(rows))
+        with open(os.path.join(out_dir, "time_to_floor.md"), "w") as fh:
+            fh.write(extra[-1])
+        pd.DataFrame(rows).to_csv(os.path.join(out_dir, "time_to_floor.csv"), index=False)
     lines = [f"# {experiment}", ""]
     if note:
         lines += [f"**{note}**", ""]
-    shas = sorted({str((r.get("env") or {}).get("git_sha")) for r in records})
+    if len(shas) > 1:
+        lines += [f"**Mixed code commits: {', '.join(shas)}: rows may not be comparable.**", ""]
     lines += [f"{len(records)} run records from `{records_dir}` (code: {', '.join(shas) or 'unknown'}).", ""]
     lines += _sweep_lines(records_dir, sweep) + ["", md]
+    for part in extra:
+        lines += ["", part]
     lines += [f"![{os.path.basename(p)}]({os.path.basename(p)})" for p in written if p.endswith(".png")]
     lines += ["", "Record keys (config hashes) per row:", ""]
     if not df.empty:
@@ -84,6 +126,10 @@ def main(argv: list[str] | None = None) -> int:
                                         "default: by the experiment's name")
     parser.add_argument("--sweep", nargs="+", metavar="OVERRIDE",
                         help="the sweep's overrides for the status in report.md (default: its newest sweep)")
+    parser.add_argument("--allow-mixed-commits", action="store_true",
+                        help="report records from several code commits (named at the top of report.md)")
+    parser.add_argument("--claims", action="store_true",
+                        help="write the paper-claims table from every experiment below the records folder")
     parser.add_argument("--status", nargs="*", metavar="OVERRIDE",
                         help="print done / failed / missing runs of the sweep instead of writing a report")
     args = parser.parse_args(argv)
@@ -98,6 +144,13 @@ def main(argv: list[str] | None = None) -> int:
     if not os.path.isdir(args.records):
         print(f"ddfbench.report: {args.records}: no such folder of run records", file=sys.stderr)
         return 2
+    if args.claims:
+        from ddfbench.report.claims import write_claims
+
+        out = args.out or os.path.join("reports", "claims.md")
+        print(write_claims(args.records, out))
+        print(f"wrote {out}")
+        return 0
     kinds = None
     if args.plots:
         kinds = tuple(k for k in args.plots.split(",") if k and k != "none")
@@ -107,7 +160,12 @@ def main(argv: list[str] | None = None) -> int:
                   file=sys.stderr)
             return 2
     out = args.out or os.path.join("reports", os.path.basename(os.path.normpath(args.records)))
-    print(write_report(args.records, out, note=args.note, kinds=kinds, sweep=args.sweep))
+    try:
+        print(write_report(args.records, out, note=args.note, kinds=kinds, sweep=args.sweep,
+                           allow_mixed_commits=args.allow_mixed_commits))
+    except MixedCommits as exc:
+        print(f"ddfbench.report: {exc}", file=sys.stderr)
+        return 2
     print(f"wrote {out}/report.md, table.md, table.csv, table.tex and plots")
     return 0
 

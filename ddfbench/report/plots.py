@@ -31,7 +31,8 @@ import matplotlib.pyplot as plt  # noqa: E402
 import matplotlib.ticker  # noqa: E402
 import numpy as np  # noqa: E402
 
-from ddfbench.metrics import penalty_metrics  # noqa: E402
+from ddfbench.metric_registry import by_name as registry_metrics  # noqa: E402
+from ddfbench.report import convergence  # noqa: E402
 from ddfbench.report.tables import override_labels  # noqa: E402
 
 PLOTS_BY_EXPERIMENT: dict[str, tuple[str, ...]] = {
@@ -42,11 +43,13 @@ PLOTS_BY_EXPERIMENT: dict[str, tuple[str, ...]] = {
     "render_time": ("render_time",),
     "pareto": ("pareto", "fit_curves"),
     "smoke": ("fit_curves", "pareto", "sampling", "render_time", "ablation"),
+    "convergence": ("convergence", "fit_curves"),
+    "render_matched": ("render_time",),
 }
 DEFAULT_PLOTS = ("fit_curves", "pareto")
 COST_AXES = (("render_warm_s", "warm render time (s)"), ("fit_s", "fit time (s)"), ("storage_bytes", "storage (bytes)"))
 SURFACE_FACTORS = ("s_fc", "s_dr", "s_p")
-PENALTY_CHAMFER_L2 = penalty_metrics([])["chamfer_l2"]  # what an empty reconstruction scores
+PENALTY_CHAMFER_L2 = registry_metrics()["chamfer_l2"].penalty  # what an empty reconstruction scores
 
 
 def pareto_front(x: Iterable[float], y: Iterable[float]) -> np.ndarray:
@@ -314,9 +317,36 @@ def plot_ablation(records: list[dict[str, Any]], out_dir: str) -> list[str]:
     return _save(fig, out_dir, "ablation")
 
 
+def plot_convergence(records: list[dict[str, Any]], out_dir: str) -> list[str]:
+    """Chamfer L2 and F@0.01 probes against fit time per model (rows: shapes): the median over seeds and
+    the min–max band, the noise floor dotted (report.convergence)."""
+    metrics = (("chamfer_l2", "chamfer L2 (probe)", "log"), ("fscore@0.01", "F@0.01 (probe)", "linear"))
+    data = {m: convergence.curves(records, m) for m, _, _ in metrics}
+    keys = sorted(set(data["chamfer_l2"]) | set(data["fscore@0.01"]))
+    if not keys:
+        return []
+    shapes = sorted({shape for _, shape in keys})
+    colors = _colors(model for model, _ in keys)
+    fig, axes = plt.subplots(len(shapes), len(metrics), figsize=(11, 4 * len(shapes)), squeeze=False)
+    for row, shape in zip(axes, shapes):
+        for ax, (metric, label, yscale) in zip(row, metrics):
+            for (model, s), runs in data[metric].items():
+                if s != shape:
+                    continue
+                t, med, lo, hi = convergence.band(runs)
+                ax.plot(t, med, "-o", ms=3, color=colors[model], label=f"{model} (n={len(runs)})")
+                ax.fill_between(t, lo, hi, color=colors[model], alpha=0.2, step="post")
+            _floor_line(ax, convergence.floor(records, shape, metric))
+            ax.set(xscale="log", yscale=yscale, xlabel="fit time (s)", ylabel=label,
+                   title=f"{shape}: median and min–max over seeds")
+            ax.grid(True, which="both", alpha=0.3)
+            ax.legend(fontsize=7)
+    return _save(fig, out_dir, "convergence")
+
+
 PLOTS: dict[str, Callable[[list[dict[str, Any]], str], list[str]]] = {
     "fit_curves": plot_fit_curves, "pareto": plot_pareto, "sampling": plot_sampling,
-    "render_time": plot_render_time, "ablation": plot_ablation,
+    "render_time": plot_render_time, "ablation": plot_ablation, "convergence": plot_convergence,
 }
 
 

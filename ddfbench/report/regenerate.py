@@ -1,11 +1,15 @@
 """`python -m ddfbench.report.regenerate [--only E1,E2] [--results DIR] [--reports DIR] [-- OVERRIDE ...]`
 
 Regenerates the committed reports: for each experiment (default: ablation, sampling, representations,
-storage, render_time, pareto) runs `python -m ddfbench +experiment=<e> out_dir=<results> [OVERRIDE ...]`
+storage, render_time, render_matched, pareto, convergence) runs `python -m ddfbench +experiment=<e> out_dir=<results> [OVERRIDE ...]`
 (finished runs are skipped, so an interrupted regeneration resumes), then writes
-`python -m ddfbench.report <results>/<e> --out <reports>/<e>`. With overrides the report's first line
+`python -m ddfbench.report <results>/<e> --out <reports>/<e>` (render_matched: `python -m
+ddfbench.report.matched <results>/render_time <results>/render_matched --out <reports>/render_matched`). With overrides the report's first line
 says "reduced budget: <overrides>" (or --note), so a report of a scaled run says how it was scaled.
-The wall time of each sweep is printed and written to <reports>/<e>/wall_time.txt.
+The wall time of each sweep is printed and written to <reports>/<e>/wall_time.txt. Last, the paper
+claims table <reports>/claims.md is rebuilt from every experiment's records (ddfbench.report.claims).
+A report comes from one code commit: records resumed across a code change are refused (start a fresh
+--results folder after changing the code).
 """
 
 from __future__ import annotations
@@ -16,9 +20,12 @@ import subprocess
 import sys
 import time
 
-from ddfbench.report.__main__ import write_report
+from ddfbench.report.__main__ import MixedCommits, write_report
+from ddfbench.report import matched
+from ddfbench.report.claims import write_claims
 
-EXPERIMENTS = ("ablation", "sampling", "representations", "storage", "render_time", "pareto")
+EXPERIMENTS = ("ablation", "sampling", "representations", "storage", "render_time", "render_matched", "pareto",
+               "convergence")
 
 
 def sweep_command(experiment: str, results: str, overrides: list[str]) -> list[str]:
@@ -40,7 +47,14 @@ def regenerate(experiment: str, results: str, reports: str, overrides: list[str]
     out = os.path.join(reports, experiment)
     if overrides and note is None:
         note = "reduced budget: " + " ".join(overrides)
-    write_report(os.path.join(results, experiment), out, note=note, sweep=[f"+experiment={experiment}", *overrides])
+    if experiment == "render_matched":  # its table sets the DDF's render_time rows beside the tracer settings
+        rc = max(rc, matched.main([os.path.join(results, "render_time"), os.path.join(results, experiment), "--out", out]))
+    else:
+        try:
+            write_report(os.path.join(results, experiment), out, note=note, sweep=[f"+experiment={experiment}", *overrides])
+        except MixedCommits as exc:  # resumed across a code change: rerun into a fresh --results folder
+            print(f"{experiment}: no report: {exc}", file=sys.stderr, flush=True)
+            return 2
     if seconds is not None:
         with open(os.path.join(out, "wall_time.txt"), "w") as fh:
             fh.write(f"{seconds:.0f} s  {' '.join(sweep_command(experiment, results, overrides)[1:])}\n")
@@ -68,6 +82,8 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     codes = [regenerate(e, args.results, args.reports, overrides, args.note, run=not args.report_only)
              for e in experiments]
+    write_claims(args.results, os.path.join(args.reports, "claims.md"))
+    print(f"claims: {os.path.join(args.reports, 'claims.md')}", flush=True)
     return max(codes, default=0)
 
 

@@ -1,12 +1,15 @@
-"""Run records → one row per configuration (mean ± std over seeds, n shown) → md / csv / tex.
+"""Run records → one row per configuration (mean ± std over seeds, n, 95 % interval) → md / csv / tex.
 
 Values stay numeric until rendered. A row is one configuration: records whose configs differ only in
 `seed` are pooled. Rows are labelled by the command-line / sweep overrides that differ between
 records (the sweep's axes, e.g. `capacity=c2`), not by every config key that differs.
 Failed runs are counted per row and a row with fewer ok runs than the fullest row is flagged
 (`n` shows "ok/expected" and a dagger), so nothing is silently averaged over fewer seeds.
-The best value per column (per shape where there are several) is marked; the metric's noise floor
-(GT against an independent resample of GT) is its own row per shape.
+The metrics are those of `ddfbench.metric_registry`. Per column (per shape where there are several)
+the best mean is bold only when its t interval over seeds overlaps no other row's; otherwise the
+rows whose intervals overlap the best are marked tied (report.stats). The metric's noise floor (GT
+against an independent resample of GT) is its own row per shape. The fit budget ("steps",
+"epochs" or "wall-clock") is a column, beside steps, epochs and fit seconds.
 """
 
 from __future__ import annotations
@@ -18,34 +21,22 @@ from typing import Any, Iterable
 import numpy as np
 import pandas as pd
 
+from ddfbench import metric_registry
+from ddfbench.report.stats import INTERVAL_NAME, best_and_ties, summarize_values
 from ddfbench.runs import NON_SEMANTIC_KEYS
 
-# column -> (header, display scale, better: "low" | "high" | "" (a setting, no best))
-METRICS: dict[str, tuple[str, float, str]] = {
-    "chamfer_l2": ("CD-L2 ×10³", 1e3, "low"),
-    "chamfer_l1": ("CD-L1 ×10³", 1e3, "low"),
-    "fscore@0.005": ("F@0.005", 1.0, "high"),
-    "fscore@0.01": ("F@0.01", 1.0, "high"),
-    "fscore@0.02": ("F@0.02", 1.0, "high"),
-    "sided_gt_to_rec_mean": ("GT→rec ×10³", 1e3, "low"),
-    "sided_rec_to_gt_mean": ("rec→GT ×10³", 1e3, "low"),
-    "normal_consistency": ("NC", 1.0, "high"),
-    "mask_iou": ("mask IoU", 1.0, "high"),
-    "depth_mae": ("depth MAE ×10³", 1e3, "low"),
-    "normal_angle_deg": ("normal err °", 1.0, "low"),
-    "storage_bytes": ("storage B", 1.0, "low"),
-    "n_params": ("params", 1.0, "low"),
-    "n_samples": ("samples", 1.0, ""),
-    "sampling_s": ("sample s", 1.0, "low"),
-    "fit_s": ("fit s", 1.0, "low"),
-    "extract_s": ("extract s", 1.0, "low"),
-    "render_cold_s": ("render cold s", 1.0, "low"),
-    "render_warm_s": ("render warm s", 1.0, "low"),
-}
-FLOOR_METRICS = ("chamfer_l2", "chamfer_l1", "fscore@0.005", "fscore@0.01", "fscore@0.02")
 FLOOR_MODEL = "noise floor"  # the `model` cell of a noise-floor row
 SEED_KEYS = ("seed",)
 INCOMPLETE = "†"  # marks a row with fewer ok runs than the fullest row
+TIE = "≈"  # marks values whose interval overlaps the best one's
+
+
+def _metrics() -> dict[str, metric_registry.Metric]:
+    return metric_registry.by_name()
+
+
+def _floor_metrics() -> list[str]:
+    return [m.name for m in metric_registry.METRICS if m.floor]
 
 
 def _flatten(prefix: str, value: Any, out: dict[str, Any]) -> None:
@@ -77,30 +68,25 @@ def override_labels(overrides: Iterable[str]) -> dict[str, str]:
     return out
 
 
-def _metric_value(name: str, m: dict[str, Any], c: dict[str, Any], sampling: dict[str, Any]) -> float:
-    if name.startswith("fscore@"):
-        return _num((m.get("fscore") or {}).get(name.split("@")[1]))
-    if name.startswith("sided_"):
-        return _num((m.get(name[: -len("_mean")]) or {}).get("mean"))
-    if name == "n_samples":
-        return _num(sampling.get("n_samples"))
-    return _num(c[name]) if name in c else _num(m.get(name))
+def budget_label(rec: dict[str, Any]) -> str:
+    """How the fit was bounded: "steps" | "epochs" | "wall-clock" (record fit.budget; "–" if none)."""
+    return str((rec.get("fit") or {}).get("budget") or "–")
 
 
 def record_row(rec: dict[str, Any]) -> dict[str, Any]:
-    """One flat row of a record: identity, status, metrics, costs and noise floor (NaN where absent)."""
-    m, c, s = rec.get("metrics") or {}, rec.get("cost") or {}, rec.get("sampling") or {}
+    """One flat row of a record: identity, status, every registry metric and noise floor (NaN where absent)."""
+    m = rec.get("metrics") or {}
     row: dict[str, Any] = {
         "key": rec.get("key"), "status": rec.get("status"), "error": rec.get("error"),
         "experiment": rec.get("experiment"), "model": rec.get("model"), "family": rec.get("family"),
         "shape": (rec.get("shape") or {}).get("name"), "seed": (rec.get("config") or {}).get("seed"),
         "empty": bool(m.get("empty_reconstruction")), "started": str(rec.get("started") or ""),
+        "budget": budget_label(rec),
     }
-    for name in METRICS:
-        row[name] = _metric_value(name, m, c, s)
-    floor = m.get("noise_floor") or {}
-    for name in FLOOR_METRICS:
-        row[f"noise_floor_{name}"] = _metric_value(name, floor, {}, {})
+    for metric in metric_registry.METRICS:
+        row[metric.name] = metric.read(rec)
+        if metric.floor:
+            row[f"noise_floor_{metric.name}"] = metric.read_floor(rec)
     cfg: dict[str, Any] = {}
     _flatten("", {k: v for k, v in (rec.get("config") or {}).items() if k not in SEED_KEYS}, cfg)
     row["_config"] = cfg
@@ -126,9 +112,10 @@ def summarize(records: Iterable[dict[str, Any]]) -> pd.DataFrame:
     """One row per configuration (seeds pooled).
 
     Columns: model, shape, one per varying override key (its value, None where a record lacks it),
-    n (ok runs), n_failed, n_expected (runs of the fullest row), n_empty (ok runs whose reconstruction
+    budget (steps | epochs | wall-clock), n (ok runs), n_failed, n_expected (runs of the fullest row), n_empty (ok runs whose reconstruction
     was empty: their metrics are the defined penalty), errors, keys (record hashes),
-    <metric>_mean, <metric>_std, noise_floor_<metric>_mean.
+    <metric>_mean, <metric>_std, <metric>_ci_lo, <metric>_ci_hi (t interval over seeds),
+    noise_floor_<metric>_mean.
     """
     rows = [record_row(r) for r in records]
     if not rows:
@@ -156,18 +143,18 @@ def summarize(records: Iterable[dict[str, Any]]) -> pd.DataFrame:
         entry: dict[str, Any] = {"model": members[0]["model"], "shape": members[0]["shape"]}
         for k in labels:
             entry[k] = members[0]["_labels"].get(k)
+        entry["budget"] = members[0]["budget"]
         entry["n"] = len(ok)
         entry["n_failed"] = len(members) - len(ok)
         entry["n_expected"] = n_expected
         entry["n_empty"] = sum(m["empty"] for m in ok)
         entry["errors"] = "; ".join(sorted({m["error"] for m in members if m["error"]}))
         entry["keys"] = " ".join(sorted(m["key"] for m in members))
-        for name in METRICS:
-            vals = np.array([m[name] for m in ok], dtype=float)
-            vals = vals[np.isfinite(vals)]
-            entry[f"{name}_mean"] = float(vals.mean()) if len(vals) else math.nan
-            entry[f"{name}_std"] = float(vals.std(ddof=1)) if len(vals) > 1 else math.nan
-        for name in FLOOR_METRICS:
+        for name in _metrics():
+            summary = summarize_values(m[name] for m in ok)
+            entry[f"{name}_mean"], entry[f"{name}_std"] = summary.mean, summary.std
+            entry[f"{name}_ci_lo"], entry[f"{name}_ci_hi"] = summary.lo, summary.hi
+        for name in _floor_metrics():
             vals = np.array([m[f"noise_floor_{name}"] for m in members], dtype=float)
             vals = vals[np.isfinite(vals)]
             entry[f"noise_floor_{name}_mean"] = float(vals.mean()) if len(vals) else math.nan
@@ -186,41 +173,49 @@ def _disambiguate(entries: list[dict[str, Any]], labels: list[str]) -> None:
 
 def noise_floor_rows(df: pd.DataFrame) -> pd.DataFrame:
     """Per shape, one row: the metrics of GT against an independent resample of GT (the metric's floor)."""
-    cols = [f"noise_floor_{m}_mean" for m in FLOOR_METRICS]
+    floor_metrics = _floor_metrics()
+    cols = [f"noise_floor_{m}_mean" for m in floor_metrics]
     if df.empty or not set(cols) <= set(df.columns):
         return pd.DataFrame()
     out = []
     for shape, part in df.groupby("shape", sort=False):
         entry: dict[str, Any] = {"model": FLOOR_MODEL, "shape": shape}
-        for m in FLOOR_METRICS:
+        for m in floor_metrics:
             vals = part[f"noise_floor_{m}_mean"].to_numpy(dtype=float)
             vals = vals[np.isfinite(vals)]
             entry[f"{m}_mean"] = float(vals.mean()) if len(vals) else math.nan
             entry[f"{m}_std"] = math.nan
-        if any(math.isfinite(entry[f"{m}_mean"]) for m in FLOOR_METRICS):
+        if any(math.isfinite(entry[f"{m}_mean"]) for m in floor_metrics):
             out.append(entry)
     return pd.DataFrame(out)
 
 
 def _shown_metrics(df: pd.DataFrame) -> list[str]:
-    return [m for m in METRICS if f"{m}_mean" in df and df[f"{m}_mean"].notna().any()]
+    return [name for name, m in _metrics().items()
+            if m.shown and f"{name}_mean" in df and df[f"{name}_mean"].notna().any()]
 
 
 def _label_columns(df: pd.DataFrame) -> list[str]:
     hidden = {"n", "n_failed", "n_expected", "n_empty", "errors", "keys"}
-    return [c for c in df.columns if not c.endswith(("_mean", "_std")) and c not in hidden]
+    return [c for c in df.columns if not c.endswith(("_mean", "_std", "_ci_lo", "_ci_hi")) and c not in hidden]
+
+
+def marks(df: pd.DataFrame, metric: str) -> pd.Series:
+    """Per row "best", "tie" or "": per shape, the best mean of `metric` is "best" only when its
+    interval overlaps no other row's, else it and the rows overlapping it are "tie" (report.stats)."""
+    out = pd.Series("", index=df.index, dtype=object)
+    better = _metrics()[metric].better
+    for _, part in df.groupby("shape", sort=False):
+        means = part[f"{metric}_mean"].astype(float).tolist()
+        intervals = list(zip(part[f"{metric}_ci_lo"].astype(float), part[f"{metric}_ci_hi"].astype(float)))
+        for i, mark in best_and_ties(means, intervals, better).items():
+            out[part.index[i]] = mark
+    return out
 
 
 def best_mask(df: pd.DataFrame, metric: str) -> pd.Series:
-    """True where a row holds the best mean of `metric` among rows of its shape (ties all marked;
-    nothing marked where a shape has one value or all its values are equal)."""
-    col = df[f"{metric}_mean"].astype(float)
-    if not METRICS[metric][2]:
-        return pd.Series(False, index=df.index)
-    by_shape = col.groupby(df["shape"])
-    best = by_shape.transform("min" if METRICS[metric][2] == "low" else "max")
-    spread = by_shape.transform("max") - by_shape.transform("min")
-    return col.notna() & (col == best) & (spread > 0)
+    """True where a row's mean of `metric` is the best of its shape and separated from the rest."""
+    return marks(df, metric) == "best"
 
 
 def _fmt(mean: float, std: float, scale: float) -> str:
@@ -241,20 +236,23 @@ def _n_cell(row: pd.Series) -> str:
 
 def _cells(df: pd.DataFrame, bold: tuple[str, str]) -> tuple[list[str], list[list[str]]]:
     labels, metrics = _label_columns(df), _shown_metrics(df)
-    header = labels + ["n"] + [METRICS[m][0] for m in metrics]
-    best = {m: best_mask(df, m) for m in metrics}
+    registry = _metrics()
+    header = labels + ["n"] + [registry[m].label for m in metrics]
+    mark = {m: marks(df, m) for m in metrics}
     body = []
     for i, row in df.iterrows():
         cells = ["–" if row[c] is None or (isinstance(row[c], float) and math.isnan(row[c])) else str(row[c])
                  for c in labels] + [_n_cell(row)]
         for m in metrics:
-            text = _fmt(row[f"{m}_mean"], row[f"{m}_std"], METRICS[m][1])
-            cells.append(f"{bold[0]}{text}{bold[1]}" if best[m][i] else text)
+            text = _fmt(row[f"{m}_mean"], row[f"{m}_std"], registry[m].scale)
+            cells.append(f"{bold[0]}{text}{bold[1]}" if mark[m][i] == "best" else
+                         f"{text} {TIE}" if mark[m][i] == "tie" else text)
         body.append(cells)
     floors = noise_floor_rows(df)
     for _, row in floors.iterrows():
         cells = [FLOOR_MODEL if c == "model" else str(row["shape"]) if c == "shape" else "" for c in labels] + [""]
-        cells += [_fmt(row[f"{m}_mean"], math.nan, METRICS[m][1]) if m in FLOOR_METRICS else "" for m in metrics]
+        cells += [_fmt(row[f"{m}_mean"], math.nan, registry[m].scale) if registry[m].floor else
+                  "0 (exact)" if m.startswith("p2s_") else "" for m in metrics]
         body.append(cells)
     return header, body
 
@@ -277,15 +275,19 @@ def to_markdown(df: pd.DataFrame) -> str:
     header, body = _cells(df, ("**", "**"))
     lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
     lines += ["| " + " | ".join(r) + " |" for r in body]
-    lines += ["", f"Bold: best per column{' per shape' if df['shape'].nunique() > 1 else ''}. "
-              f"'{FLOOR_MODEL}': GT against an independent resample of GT (the metric cannot resolve below it)."]
+    per_shape = " per shape" if df["shape"].nunique() > 1 else ""
+    lines += ["", f"Mean ± std over seeds, n runs. Bold: best per column{per_shape}, its {INTERVAL_NAME} "
+              f"(table.csv: _ci_lo, _ci_hi) overlapping no other row's; {TIE}: tied, the intervals of these "
+              f"values overlap the best one's (with n = 1 every value is tied). "
+              f"'{FLOOR_MODEL}': GT against an independent resample of GT (the sampled metric cannot resolve "
+              f"below it); the point-to-surface (p2s) chamfer measures exact distances and has no such floor."]
     lines += [""] + _footnotes(df) if _footnotes(df) else []
     return "\n".join(lines) + "\n"
 
 
 def _tex_escape(text: str) -> str:
     for a, b in (("\\", r"\textbackslash{}"), ("_", r"\_"), ("%", r"\%"), ("&", r"\&"), ("#", r"\#"),
-                 ("{", r"\{"), ("}", r"\}"), ("±", r"$\pm$"), ("×10³", r"$\times10^3$"), ("→", r"$\to$"),
+                 ("{", r"\{"), ("}", r"\}"), ("±", r"$\pm$"), ("×10³", r"$\times10^3$"), ("→", r"$\to$"), (TIE, r"$\approx$"),
                  ("°", r"$^\circ$"), ("–", "--"), (INCOMPLETE, r"$^\dagger$")):
         text = text.replace(a, b)
     return text
@@ -306,5 +308,6 @@ def to_latex(df: pd.DataFrame) -> str:
 
 
 def to_csv(df: pd.DataFrame, path: str) -> None:
-    """Numeric CSV: every <metric>_mean/_std unscaled, n, n_failed, n_expected, record keys; floor rows last."""
+    """Numeric CSV: every <metric>_mean/_std/_ci_lo/_ci_hi unscaled (t interval over seeds, 95 %), n,
+    n_failed, n_expected, record keys; floor rows last."""
     pd.concat([df, noise_floor_rows(df)], ignore_index=True).to_csv(path, index=False)

@@ -35,11 +35,21 @@ def _strategy(name: Any):
     return importlib.import_module(f"{__name__}.{name}")
 
 
+def line_hits(oracle: Oracle, x: np.ndarray, d: np.ndarray, hit: np.ndarray) -> np.ndarray:
+    """(N,) bool: the line through x (N,3) along unit d (N,3) meets the surface, given hit (N,) of the ray
+    from x along d: a hit, or a miss whose backward ray from x along -d meets the surface (one cast per miss).
+    The same label for every strategy, so that a family reading it gets the same information from each."""
+    out = np.asarray(hit, bool).copy()
+    miss = np.flatnonzero(~out)
+    out[miss] = oracle.any_hit(x[miss], -np.asarray(d[miss]))
+    return out
+
+
 def build(shape: Shape, oracle: Oracle, cfg: Mapping[str, Any], kind: str, seed: int,
           cache_dir: str) -> tuple[Samples, str, dict[str, Any]]:
     """Labelled samples for `shape`, the path of their cached .npz, and the info for the run record.
 
-    cfg: the sampling config (key `strategy` picks the module); kind: "rays" (x, d, t, hit) or
+    cfg: the sampling config (key `strategy` picks the module); kind: "rays" (x, d, t, hit, line_hit) or
     "sdf" (x, sdf). A dataset already cached under the same key is loaded instead of rebuilt.
     info: strategy, kind, n_samples, n_hit, sampling_s (of the build, also on a cache hit),
     samples_per_s, cache_hit, load_s, rejected {reason: count}, memory_bytes, the strategy's parameters.
@@ -57,16 +67,19 @@ def build(shape: Shape, oracle: Oracle, cfg: Mapping[str, Any], kind: str, seed:
 
     t0 = time.perf_counter()
     samples, params, rejected = module.sample(shape, oracle, cfg, kind, np.random.default_rng(seed))
+    if kind == "rays":
+        samples.line_hit = line_hits(oracle, samples.x, samples.d, samples.hit)
     seconds = time.perf_counter() - t0
     if len(samples) == 0:
         raise InputError(
             f"shape {shape.name}: sampling={cfg['strategy']} produced no samples, every candidate was rejected "
             f"({', '.join(f'{k} {v}' for k, v in rejected.items()) or 'none drawn'})"
         )
-    arrays = [a for a in (samples.x, samples.d, samples.t, samples.hit, samples.sdf) if a is not None]
+    arrays = [a for a in (samples.x, samples.d, samples.t, samples.hit, samples.line_hit, samples.sdf) if a is not None]
     samples.meta = {
         "strategy": cfg["strategy"], "kind": kind, "seed": int(seed), "n_samples": len(samples),
         "n_hit": int(samples.hit.sum()) if samples.hit is not None else None,
+        "n_line_miss": int((~samples.line_hit).sum()) if samples.line_hit is not None else None,
         "sampling_s": seconds, "samples_per_s": len(samples) / max(seconds, 1e-9),
         "rejected": rejected, "memory_bytes": int(sum(a.nbytes for a in arrays)), **params,
     }

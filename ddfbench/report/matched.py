@@ -1,0 +1,140 @@
+"""Render speed at matched depth error: each family's fastest setting that is at least as accurate as the DDF.
+
+`python -m ddfbench.report.matched results/render_time results/render_matched [--out reports/render_matched]`
+
+A family's settings are its rows: sphere-tracer settings (model.trace: eps, eps_abs, omega) for the SDF
+families, the mesh LODs for the mesh family. Per shape and image size, against every reference (the
+`ddf` model) row, a family's matched setting is its fastest (lowest mean warm render time) whose mean
+depth error is at most the reference's; the default setting (untouched tracer, full mesh) stands beside
+it. Speed-up = the setting's warm render time / the reference's (> 1: the DDF renders faster).
+Means over seeds with n; depth error in normalized units (×10³ in the table), warm time in seconds.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import sys
+from typing import Any, Iterable
+
+import pandas as pd
+
+from ddfbench.report.stats import summarize_values
+from ddfbench.runs import find_records
+
+REFERENCE = "ddf"
+ERROR, SPEED = ("metrics", "depth_mae"), ("cost", "render_warm_s")
+NOT_REACHED = "not reached"
+
+
+def _value(rec: dict[str, Any], path: tuple[str, str]) -> float:
+    v = (rec.get(path[0]) or {}).get(path[1])
+    return float(v) if isinstance(v, (int, float)) else math.nan
+
+
+def setting_label(rec: dict[str, Any]) -> str:
+    """What distinguishes a row inside its family: the model name and its non-default tracer keys."""
+    trace = ((rec.get("config") or {}).get("model") or {}).get("trace") or {}
+    return f"{rec.get('model')} {json.dumps(trace, sort_keys=True)}" if trace else str(rec.get("model"))
+
+
+def settings_table(records: Iterable[dict[str, Any]]) -> pd.DataFrame:
+    """One row per (family, setting, shape, image size), seeds pooled: error/speed mean, std, n, interval."""
+    groups: dict[tuple, list[dict[str, Any]]] = {}
+    for rec in records:
+        if rec.get("status") != "ok":
+            continue
+        scene = rec.get("scene") or {}
+        key = (rec.get("family"), setting_label(rec), rec.get("model"), (rec.get("shape") or {}).get("name"),
+               f"{scene.get('width')}x{scene.get('height')}")
+        groups.setdefault(key, []).append(rec)
+    rows = []
+    for (family, setting, model, shape, size), recs in groups.items():
+        row = {"family": family, "setting": setting, "model": model, "shape": shape, "size": size,
+               "default": setting == family}  # untouched tracer; the full mesh (model "mesh")
+        for name, path in (("depth_mae", ERROR), ("render_warm_s", SPEED)):
+            s = summarize_values(_value(r, path) for r in recs)
+            row.update({f"{name}_mean": s.mean, f"{name}_std": s.std, f"{name}_ci_lo": s.lo,
+                        f"{name}_ci_hi": s.hi, f"{name}_n": s.n})
+        rows.append(row)
+    return pd.DataFrame(rows)
+
+
+def matched_table(records: Iterable[dict[str, Any]], reference: str = REFERENCE) -> pd.DataFrame:
+    """Per (shape, size, reference row, other family): the default and the matched setting with speed-ups.
+
+    matched = the family's fastest setting with mean depth error <= the reference's ("not reached" when
+    none is that accurate; the family's most accurate setting is then shown)."""
+    table = settings_table(records)
+    out = []
+    if table.empty:
+        return pd.DataFrame(out)
+    for (shape, size), part in table.groupby(["shape", "size"], sort=False):
+        for _, ref in part[part["model"] == reference].iterrows():
+            others = part[part["family"] != ref["family"]]
+            for family, fam in others.groupby("family", sort=False):
+                ok = fam[fam["depth_mae_mean"] <= ref["depth_mae_mean"]]
+                pick = ok.nsmallest(1, "render_warm_s_mean") if len(ok) else fam.nsmallest(1, "depth_mae_mean")
+                default = fam[fam["default"]].nsmallest(1, "depth_mae_mean")
+                entry = {"shape": shape, "size": size, "reference": ref["setting"],
+                         "reference_depth_mae": ref["depth_mae_mean"], "reference_warm_s": ref["render_warm_s_mean"],
+                         "reference_n": ref["render_warm_s_n"], "family": family}
+                for tag, row in (("default", default), ("matched", pick)):
+                    r = row.iloc[0] if len(row) else None
+                    entry[f"{tag}_setting"] = None if r is None else r["setting"]
+                    entry[f"{tag}_depth_mae"] = math.nan if r is None else r["depth_mae_mean"]
+                    entry[f"{tag}_warm_s"] = math.nan if r is None else r["render_warm_s_mean"]
+                    entry[f"{tag}_n"] = 0 if r is None else r["render_warm_s_n"]
+                    entry[f"{tag}_speedup"] = (math.nan if r is None else r["render_warm_s_mean"] / ref["render_warm_s_mean"])
+                entry["matched_reached"] = bool(len(ok))
+                out.append(entry)
+    return pd.DataFrame(out)
+
+
+def _num(v: float, scale: float = 1.0, fmt: str = ".3g") -> str:
+    return "–" if v is None or not math.isfinite(v) else format(v * scale, fmt)
+
+
+def to_markdown(df: pd.DataFrame) -> str:
+    """The matched table as markdown, one line per (shape, size, reference, family)."""
+    header = ["shape", "size", "DDF depth err ×10³", "DDF warm s", "family", "default setting",
+              "depth err ×10³", "warm s", "× DDF time", "matched setting", "depth err ×10³", "warm s", "× DDF time"]
+    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    for _, r in df.iterrows():
+        matched = r["matched_setting"] if r["matched_reached"] else f"{NOT_REACHED} (most accurate: {r['matched_setting']})"
+        lines.append("| " + " | ".join([
+            str(r["shape"]), str(r["size"]), _num(r["reference_depth_mae"], 1e3), _num(r["reference_warm_s"]),
+            str(r["family"]), str(r["default_setting"]), _num(r["default_depth_mae"], 1e3), _num(r["default_warm_s"]),
+            _num(r["default_speedup"]), matched, _num(r["matched_depth_mae"], 1e3), _num(r["matched_warm_s"]),
+            _num(r["matched_speedup"])]) + " |")
+    lines += ["", "Means over seeds (n in table.csv). × DDF time: the family's warm render time over the DDF's "
+              "(> 1: the DDF is faster). Matched: the family's fastest setting whose mean depth error is at most "
+              "the DDF's; 'not reached': no setting is that accurate."]
+    return "\n".join(lines) + "\n"
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m ddfbench.report.matched", description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("records", nargs="+", help="folders of run records (render_time, render_matched)")
+    parser.add_argument("--out", default=os.path.join("reports", "render_matched"))
+    args = parser.parse_args(argv)
+    missing = [d for d in args.records if not os.path.isdir(d)]
+    if missing:
+        print(f"ddfbench.report.matched: {', '.join(missing)}: no such folder of run records", file=sys.stderr)
+        return 2
+    records = [r for d in args.records for r in find_records(d)]
+    df = matched_table(records)
+    os.makedirs(args.out, exist_ok=True)
+    md = to_markdown(df)
+    with open(os.path.join(args.out, "table.md"), "w") as fh:
+        fh.write(md)
+    df.to_csv(os.path.join(args.out, "table.csv"), index=False)
+    print(md)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,55 @@
+"""Fit budgets (ddfbench.budget): steps and epochs fix the work, wall-clock is labelled as such; the runner
+records the bound that ended a fit, the epochs made, and fits a seeded subset at train.n_labels."""
+
+import math
+import subprocess
+import sys
+
+import pytest
+
+from ddfbench.budget import fit_limit, fit_record
+from ddfbench.errors import InputError
+from ddfbench.runs import find_records
+
+TRAIN = {"max_steps": 1000, "max_seconds": 5.0, "max_epochs": 2.5}
+
+
+def test_steps_and_epochs_have_no_time_limit_and_wall_clock_keeps_it():
+    steps = fit_limit({**TRAIN, "budget": "steps"}, {"batch_size": 100}, 1000)
+    assert (steps.max_steps, steps.max_seconds) == (1000, math.inf)
+    epochs = fit_limit({**TRAIN, "budget": "epochs"}, {"batch_size": 300}, 1000)
+    assert (epochs.max_steps, epochs.max_seconds) == (9, math.inf)  # ceil(2.5 * 1000 / 300)
+    assert fit_limit({**TRAIN, "budget": "epochs"}, {"batch": 250}, 1000).max_steps == 10
+    clock = fit_limit({**TRAIN, "budget": "wall-clock"}, {}, None)
+    assert (clock.max_steps, clock.max_seconds) == (1000, 5.0)
+
+
+def test_the_record_names_the_bound_that_ended_the_fit():
+    limit = fit_limit({**TRAIN, "budget": "wall-clock"}, {"batch_size": 100}, 1000)
+    assert fit_record(limit, "max_seconds", 30, {"batch_size": 100}, 1000) == {"budget": "wall-clock", "epochs": 3.0}
+    steps = fit_limit({**TRAIN, "budget": "steps"}, {}, 1000)
+    assert fit_record(steps, "max_steps", 30, {}, 1000) == {"budget": "steps", "epochs": None}  # no batch: no epochs
+
+
+@pytest.mark.parametrize("train,message", [({"budget": "minutes"}, "train.budget 'minutes'"),
+                                           ({"budget": "epochs", "max_epochs": None}, "train.max_epochs None"),
+                                           ({"budget": "epochs", "max_epochs": 0}, "train.max_epochs 0")])
+def test_bad_budgets_name_the_key(train, message):
+    with pytest.raises(InputError, match=message):
+        fit_limit({**TRAIN, **train}, {"batch_size": 100}, 1000)
+
+
+def test_an_epoch_budget_on_a_label_subset_runs_and_is_recorded(tmp_path):
+    args = ["model=ddf", "model.width=16", "model.depth=2", "model.batch_size=500", "shape=sphere", "eval=smoke",
+            "eval.n_points=1000", "eval.mesh_resolution=16", "scene=none", "sampling=random",
+            "sampling.n_samples=3000", "train.budget=epochs", "train.max_epochs=2", "train.n_labels=1000",
+            "train.n_probes=0", "threads=1", "quiet=true", f"out_dir={tmp_path}"]
+    done = subprocess.run([sys.executable, "-m", "ddfbench", *args], capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr[-2000:]
+    (rec,) = find_records(str(tmp_path))
+    assert rec["fit"]["steps"] == 4 and rec["fit"]["epochs"] == pytest.approx(2.0)  # 2 x 1000 / 500
+    assert rec["fit"]["budget"] == "epochs"
+    assert rec["sampling"]["n_samples"] == 1000 and rec["sampling"]["n_generated"] == 3000
+    too_many = subprocess.run([sys.executable, "-m", "ddfbench", *args[:-1], "train.n_labels=5000",
+                               f"out_dir={tmp_path}/b"], capture_output=True, text=True, timeout=600)
+    assert too_many.returncode != 0 and "train.n_labels=5000" in too_many.stderr + too_many.stdout

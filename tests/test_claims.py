@@ -1,0 +1,150 @@
+"""reports/claims.md from a small set of synthetic records: every listed claim has a row, and a
+verdict follows the numbers (flip the numbers, the verdict flips)."""
+
+import pytest
+
+from ddfbench.report import claims
+from ddfbench.report.__main__ import main as report_main
+from ddfbench.runs import write_json_atomic
+
+SEEDS = (0, 1, 2)
+
+
+def rec(experiment, model, seed, chamfer, shape="bunny", sampling=None, cost=None, scene=None, family=None,
+        device="cpu", sha="abc"):
+    """A record with only what the claims read."""
+    sampling = sampling or {}
+    return {"key": f"{experiment}-{model}-{shape}-{seed}-{sorted(sampling.items())}-{sorted((scene or {}).items())}",
+            "status": "ok", "experiment": experiment, "model": model, "family": family or model,
+            "shape": {"name": shape}, "sampling": sampling, "scene": scene or {},
+            "metrics": {"chamfer_l2": chamfer, "n_points": 2000}, "cost": cost or {}, "config": {"seed": seed},
+            "env": {"git_sha": sha, "device": device}}
+
+
+def jitter(seed, x, spread=0.02):
+    return x * (1 + spread * (seed - 1))
+
+
+def ablation(cd30):
+    """cd30: {factor: chamfer at level 30}; the base 10/10/10 at 1e-3."""
+    out = [rec("ablation", "ddf", s, jitter(s, 1e-3), shape="bone", sampling={"s_fc": 10, "s_dr": 10, "s_p": 10})
+           for s in SEEDS]
+    for f, cd in cd30.items():
+        levels = {k: 30 if k == f else 10 for k in ("s_fc", "s_dr", "s_p")}
+        out += [rec("ablation", "ddf", s, jitter(s, cd), shape="bone", sampling=levels) for s in SEEDS]
+    return out
+
+
+def sampling(cd):
+    """cd: {strategy: chamfer at 1000 labels} (x 0.1 at 10000)."""
+    return [rec("sampling", "ddf", s, jitter(s, c * scale), shape="bone", sampling={"strategy": st, "n_samples": n})
+            for st, c in cd.items() for n, scale in ((1000, 1.0), (10000, 0.1)) for s in SEEDS]
+
+
+def representations(ddf_ratio, sdf=1e-4):
+    """The DDF at ddf_ratio x the neural SDF's chamfer on every shape."""
+    out = []
+    for shape in ("bunny", "cow"):
+        out += [rec("representations", "ddf", s, jitter(s, ddf_ratio * sdf), shape=shape,
+                    cost={"fit_s": 40.0, "n_params": 6e4}) for s in SEEDS]
+        out += [rec("representations", "neural_sdf", s, jitter(s, sdf), shape=shape, cost={"fit_s": 40.0, "n_params": 9e4})
+                for s in SEEDS]
+    return out
+
+
+def render_time(device):
+    out = []
+    for model, t in (("ddf", 0.08), ("neural_sdf", 0.6), ("mesh", 0.006)):
+        out += [rec("render_time", model, s, 1e-5, scene={"width": 64}, cost={"render_warm_s": jitter(s, t)},
+                    device=device) for s in SEEDS]
+    return out
+
+
+def storage(g_bytes):
+    return [rec("storage", "gan_sdf", 0, 1e-2, cost={"storage_bytes": g_bytes}),
+            rec("storage", "mesh", 0, 1e-5, cost={"storage_bytes": 1.07e6}),
+            rec("storage", "grid_sdf", 0, 1e-5, cost={"storage_bytes": 8.4e6})]
+
+
+def records(**over):
+    base = {"ablation": ablation({"s_fc": 0.9e-3, "s_dr": 0.95e-3, "s_p": 0.2e-3}),
+            "sampling": sampling({"surface": 1e-4, "pov": 3e-4, "random": 9e-4}),
+            "representations": representations(3.0),
+            "render_time": render_time("cpu"), "storage": storage(50e3)}
+    return base | over
+
+
+def verdicts(recs):
+    return {c.claim: c.verdict for c in claims.evaluate(recs)}
+
+
+def test_every_claim_has_a_row_with_a_verdict():
+    v = verdicts(records())
+    assert v["s_p matters more than s_fc"] == v["s_p matters more than s_dr"] == claims.CONFIRMED
+    assert v["s_fc matters more than s_dr (paper's text)"] == claims.CONFIRMED
+    assert v["surface beats pov at equal counts"] == v["pov beats random at equal counts"] == claims.CONFIRMED
+    assert v["ddf: bunny chamfer at most the paper's 0.589×10³"] == claims.CONFIRMED
+    assert v["ddf_paper: bunny chamfer at most the paper's 0.589×10³"] == claims.NO_RECORDS
+    assert v["DDF as accurate as the neural SDF"] == claims.REFUTED  # 3x worse
+    assert v["DDF renders faster than neural_sdf"] == v["DDF renders faster than mesh"] == claims.NOT_TESTABLE
+    assert v["the generator G stores in ~47 KB"] == v["G < mesh < grid SDF in storage"] == claims.CONFIRMED
+    assert v["GAN more accurate than CNN on 2D SDFs"] == claims.NOT_TESTABLE
+    assert set(verdicts({}).values()) == {claims.NO_RECORDS, claims.NOT_TESTABLE}
+
+
+@pytest.mark.parametrize("change,claim,before,after", [
+    ({"ablation": ablation({"s_fc": 0.1e-3, "s_dr": 0.95e-3, "s_p": 0.2e-3})}, "s_p matters more than s_fc",
+     claims.CONFIRMED, claims.REFUTED),
+    ({"ablation": ablation({"s_fc": 0.2e-3, "s_dr": 0.95e-3, "s_p": 0.2e-3})}, "s_p matters more than s_fc",
+     claims.CONFIRMED, claims.NOT_SEPARABLE),
+    ({"sampling": sampling({"surface": 5e-4, "pov": 3e-4, "random": 9e-4})}, "surface beats pov at equal counts",
+     claims.CONFIRMED, claims.REFUTED),
+    ({"representations": representations(9.0)}, "ddf: bunny chamfer at most the paper's 0.589×10³",
+     claims.CONFIRMED, claims.REFUTED),
+    ({"representations": representations(1.05)}, "DDF as accurate as the neural SDF", claims.REFUTED,
+     claims.CONFIRMED),
+    ({"render_time": render_time("cuda")}, "DDF renders faster than neural_sdf", claims.NOT_TESTABLE, claims.CONFIRMED),
+    ({"render_time": render_time("cuda")}, "DDF renders faster than mesh", claims.NOT_TESTABLE, claims.REFUTED),
+    ({"storage": storage(2e6)}, "G < mesh < grid SDF in storage", claims.CONFIRMED, claims.REFUTED),
+])
+def test_a_verdict_flips_when_the_numbers_do(change, claim, before, after):
+    assert verdicts(records())[claim] == before
+    assert verdicts(records(**change))[claim] == after
+
+
+def test_report_command_writes_claims_md(tmp_path):
+    for experiment, recs in records().items():
+        for r in recs:
+            write_json_atomic(str(tmp_path / "results" / experiment / r["key"] / "record.json"), r)
+    out = tmp_path / "claims.md"
+    assert report_main([str(tmp_path / "results"), "--claims", "--out", str(out)]) == 0
+    text = out.read_text()
+    assert "python -m ddfbench.report --claims" in text and "(code: abc)" in text
+    rows = [line for line in text.splitlines() if line.startswith("| ") and "---" not in line][1:]
+    assert len(rows) == len(claims.evaluate(records())) and all(line.count(" | ") == 6 for line in rows)
+
+
+def render_matched(loose_warm_s, device="cuda"):
+    """neural_sdf with a loose tracer: depth error 0.015 (below the DDF's 0.02) at loose_warm_s."""
+    out = []
+    for s in SEEDS:
+        r = rec("render_matched", "neural_sdf", s, 1e-4, scene={"width": 64, "height": 64},
+                cost={"render_warm_s": loose_warm_s}, device=device)
+        r["metrics"]["depth_mae"], r["config"]["model"] = 0.015, {"trace": {"eps_abs": 3e-3}}
+        out.append(r)
+    return out
+
+
+def test_matched_depth_error_row_follows_the_loosened_tracer():
+    times = render_time("cuda")
+    for r in times:
+        r["scene"]["height"] = 64
+        r["metrics"]["depth_mae"] = {"ddf": 0.02, "neural_sdf": 0.001, "mesh": 0.0}[r["model"]]
+        if r["model"] == "mesh":
+            r["cost"]["render_warm_s"] = 0.5  # slower than the DDF here: the verdict hangs on the neural SDF
+    claim = "DDF renders faster at matched depth error"
+    assert verdicts(records(render_time=times, render_matched=render_matched(0.05)))[claim] == claims.REFUTED
+    assert verdicts(records(render_time=times, render_matched=render_matched(0.2)))[claim] == claims.CONFIRMED
+    for r in times:
+        r["env"]["device"] = "cpu"
+    assert verdicts(records(render_time=times, render_matched=render_matched(0.2, "cpu")))[claim] == claims.NOT_TESTABLE

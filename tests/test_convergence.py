@@ -1,0 +1,62 @@
+"""+experiment=convergence: the band over seeds, time to reach k x the floor, and the report files."""
+
+import math
+
+import numpy as np
+import pytest
+
+from ddfbench.report import convergence
+from ddfbench.report.__main__ import main as report_main
+from ddfbench.runs import write_json_atomic
+
+
+def run(model, shape, seed, probes, floor=1e-5):
+    """A convergence record: probes [(seconds, chamfer)], F@0.01 = 1 - 10 x chamfer."""
+    return {"key": f"{model}-{shape}-{seed}", "status": "ok", "experiment": "convergence", "model": model,
+            "family": model, "shape": {"name": shape}, "config": {"seed": seed}, "env": {"git_sha": "abc"},
+            "overrides": [f"model={model}", f"shape={shape}", f"seed={seed}"], "sampling": {}, "cost": {},
+            "metrics": {"chamfer_l2": probes[-1][1], "noise_floor": {"chamfer_l2": floor, "fscore": {"0.01": 1.0}}},
+            "fit": {"probes": [{"step": i, "seconds": s, "chamfer_l2": c, "fscore@0.01": 1 - 10 * c}
+                               for i, (s, c) in enumerate(probes)]}}
+
+
+def test_band_holds_each_seed_at_its_last_probe():
+    runs = [(np.array([1.0, 10.0]), np.array([4.0, 1.0])), (np.array([3.0, 30.0]), np.array([2.0, 0.5]))]
+    t, med, lo, hi = convergence.band(runs)
+    assert t.tolist() == [1, 3, 10, 30]
+    assert lo.tolist() == [4, 2, 1, 0.5] and hi.tolist() == [4, 4, 2, 1]
+    assert med.tolist() == [4, 3, 1.5, 0.75]
+
+
+def test_time_to_floor_median_over_seeds_and_not_reached():
+    recs = [run("ddf", "bunny", s, [(1, 1e-3), (10, 4e-5), (100, 1.5e-5 + 1e-6 * s)]) for s in range(3)]
+    recs += [run("gan_sdf", "bunny", s, [(1, 1e-2), (100, 1e-3 if s else 4e-5)]) for s in range(3)]
+    rows = {r["model"]: r for r in convergence.time_to_floor_rows(recs)}
+    assert rows["ddf"]["median_s_5x"] == 10 and rows["ddf"]["median_s_2x"] == 100 and rows["ddf"]["reached_2x"] == 3
+    assert rows["gan_sdf"]["reached_5x"] == 1 and math.isinf(rows["gan_sdf"]["median_s_5x"])  # 1 of 3: not reached
+    md = convergence.to_markdown(list(rows.values()))
+    assert "| ddf | bunny | 3 | 0.01 | 10 (3/3) | 100 (3/3) |" in md and "not reached (1/3)" in md
+
+
+def test_report_writes_the_band_plot_and_the_time_to_floor_table(tmp_path):
+    for shape in ("bunny", "bone"):
+        for s in range(3):
+            r = run("neural_sdf", shape, s, [(0.3, 1e-3), (3, 1e-4), (30, 3e-5 * (1 + s))])
+            write_json_atomic(str(tmp_path / "rec" / r["key"] / "record.json"), r)
+    out = tmp_path / "rep"
+    assert report_main([str(tmp_path / "rec"), "--out", str(out)]) == 0
+    assert (out / "convergence.png").read_bytes()[:4] == b"\x89PNG"
+    table = (out / "time_to_floor.md").read_text()
+    assert "| neural_sdf | bone | 3 |" in table and "time to 2× floor" in table
+    assert "Time to reach the noise floor" in (out / "report.md").read_text()
+
+
+def test_the_convergence_sweep_is_every_learned_family_on_bunny_and_bone_with_three_seeds():
+    from ddfbench.report.status import expected_grid
+
+    jobs, _ = expected_grid("/nonexistent/convergence", ["+experiment=convergence"])
+    swept = [dict(o.split("=", 1) for o in j.swept) for j in jobs]
+    assert {(s["model"], s["shape"], s["seed"]) for s in swept} == {
+        (m, sh, str(seed)) for m in ("ddf", "ddf_paper", "neural_sdf", "gan_sdf") for sh in ("bunny", "bone")
+        for seed in range(3)}
+    assert len({j.key for j in jobs}) == 24

@@ -1,0 +1,67 @@
+"""Render speed at matched depth error (ddfbench.report.matched) on synthetic records, and the experiment grid."""
+
+import math
+
+import pytest
+
+from ddfbench.report import matched
+
+
+def rec(model, family, depth_mae, warm_s, seed=0, trace=None, width=64):
+    cfg = {"seed": seed, "model": {"family": family, **({"trace": trace} if trace else {})}}
+    return {"status": "ok", "model": model, "family": family, "shape": {"name": "bunny"},
+            "scene": {"width": width, "height": width}, "config": cfg,
+            "metrics": {"depth_mae": depth_mae}, "cost": {"render_warm_s": warm_s}}
+
+
+def records(sdf_loose_error):
+    out = []
+    for seed in (0, 1, 2):
+        out.append(rec("ddf", "ddf", 2e-3, 0.1, seed))
+        out.append(rec("ddf_paper", "ddf", 9e-3, 0.3, seed))  # another DDF preset: not a candidate
+        out.append(rec("neural_sdf", "neural_sdf", 1e-3, 0.5, seed))  # default tracer
+        out.append(rec("neural_sdf", "neural_sdf", 1.8e-3, 0.2, seed, {"eps_abs": 1e-3}))
+        out.append(rec("neural_sdf", "neural_sdf", sdf_loose_error, 0.05, seed, {"eps_abs": 1e-2, "omega": 1.6}))
+        out.append(rec("mesh", "mesh", 0.5e-3, 0.3, seed))
+        out.append(rec("mesh_lod500", "mesh", 3e-3, 0.02, seed))
+    return out
+
+
+def by_family(df):
+    return {r["family"]: r for _, r in df.iterrows()}
+
+
+def test_matched_setting_is_the_fastest_at_most_as_inaccurate_as_the_ddf():
+    rows = by_family(matched.matched_table(records(sdf_loose_error=5e-3)))
+    assert set(rows) == {"neural_sdf", "mesh"}
+    sdf = rows["neural_sdf"]
+    assert sdf["default_setting"] == "neural_sdf" and sdf["default_speedup"] == pytest.approx(5.0)
+    assert sdf["matched_setting"] == 'neural_sdf {"eps_abs": 0.001}' and sdf["matched_speedup"] == pytest.approx(2.0)
+    assert rows["mesh"]["matched_setting"] == "mesh" and rows["mesh"]["matched_speedup"] == pytest.approx(3.0)
+    assert sdf["reference_n"] == 3 and sdf["matched_n"] == 3
+
+
+def test_a_looser_tracer_that_reaches_the_ddf_error_becomes_the_match():
+    sdf = by_family(matched.matched_table(records(sdf_loose_error=1.9e-3)))["neural_sdf"]
+    assert sdf["matched_setting"].startswith('neural_sdf {"eps_abs": 0.01') and sdf["matched_speedup"] == pytest.approx(0.5)
+
+
+def test_no_setting_as_accurate_is_not_reached():
+    recs = [r for r in records(5e-3) if r["model"] != "mesh"]  # only the coarse LOD is left
+    rows = by_family(matched.matched_table(recs))
+    assert not rows["mesh"]["matched_reached"] and rows["mesh"]["matched_setting"] == "mesh_lod500"
+    assert math.isnan(rows["mesh"]["default_speedup"])  # the full mesh was not run
+    assert matched.NOT_REACHED in matched.to_markdown(matched.matched_table(recs))
+
+
+def test_sizes_are_compared_only_with_their_own_size():
+    recs = records(5e-3) + [rec("neural_sdf", "neural_sdf", 1e-4, 0.01, 0, width=32)]  # no 32x32 DDF
+    df = matched.matched_table(recs)
+    assert set(df["size"]) == {"64x64"}
+
+
+def test_render_matched_grid_sweeps_tracer_settings_of_the_sdf_families():
+    from ddfbench.report.status import expected_grid
+
+    jobs, _ = expected_grid("/nonexistent/render_matched", ["+experiment=render_matched"])
+    assert len(jobs) == 2 * 4 * 2 * 3 and len({j.key for j in jobs}) == len(jobs)
