@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 import torch
 
-from ddfbench.hard_shapes import HARD
+from ddfbench.shapes import HARD_CASES
 from ddfbench.models import available_families
 from ddfbench.shapes import Shape, load_shape
 
@@ -13,7 +13,7 @@ torch.set_num_threads(1)
 
 def hard_shape(name: str, **params) -> Shape:
     """A `hard/...` catalog shape, validated and normalized exactly as shapes.load_shape does for any mesh."""
-    assert name in HARD, name
+    assert name in HARD_CASES, name
     return load_shape({"name": name, "params": params})
 
 

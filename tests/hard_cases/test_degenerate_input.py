@@ -12,7 +12,7 @@ import pytest
 import trimesh
 
 from ddfbench.errors import InputError
-from ddfbench.hard_shapes import dirty_sphere
+from ddfbench.catalog import dirty_sphere
 from ddfbench.metrics import sample_surface
 from ddfbench.oracle import Oracle
 from tests.hard_cases.conftest import assert_well_formed, hard_shape, unit
