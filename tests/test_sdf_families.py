@@ -17,7 +17,7 @@ from ddfbench.models.neural_sdf import clamped_l1
 from ddfbench.oracle import Oracle
 from ddfbench.representation import Budget, FitData, RayStatus
 from ddfbench.shapes import load_shape
-from ddfbench.trace_bench import oracle_sdf_samples
+from ddfbench.sampling.oracle_sdf import oracle_sdf_samples
 
 RADIUS = 0.5  # the catalog sphere, normalized: an icosphere of radius 0.5 (faceted: gaps below 4e-4)
 DOMAIN = 0.6

@@ -22,7 +22,7 @@ from ddfbench.oracle import Oracle
 from ddfbench.render.counting import CountedTracer
 from ddfbench.representation import Budget, FitData, RayStatus
 from ddfbench.trace import TraceOptions, sphere_trace
-from ddfbench.trace_bench import oracle_sdf_samples
+from ddfbench.sampling.oracle_sdf import oracle_sdf_samples
 from tests.hard_cases.conftest import assert_well_formed, compose, has_family, hard_shape, unit
 
 RAY_OFFSET = 1e-3  # conf/scene/*.yaml ray_offset: checked below against the scene configs
