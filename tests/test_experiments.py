@@ -84,6 +84,7 @@ def test_gan_sdf_levels_set_its_fit_budget_and_others_keep_the_experiments(exper
     assert len(set(budgets)) == 4 and len(ddf) == 1  # the bug this guards against: one budget for all levels
 
 
+@pytest.mark.slow
 def test_smoke_runs_every_family_and_strategy_and_reports(tmp_path):
     env = dict(os.environ, PYTHONUNBUFFERED="1")
     run = subprocess.run([sys.executable, "-m", "ddfbench", "+experiment=smoke", f"out_dir={tmp_path}", "quiet=true"],

@@ -127,6 +127,7 @@ def test_device_follows_the_visible_gpus():
 # --- launchers give the serial run's records ---------------------------------------------------
 
 @pytest.mark.parametrize("launcher", ["local_parallel", "slurm_local"])
+@pytest.mark.slow
 def test_launcher_records_equal_the_serial_run(serial, tmp_path, launcher):
     serial_dir, expected = serial
     launch(tmp_path, f"hydra/launcher={launcher}")
@@ -153,6 +154,7 @@ def test_launcher_records_equal_the_serial_run(serial, tmp_path, launcher):
 
 # --- SIGKILL part way, then re-launch ------------------------------------------------------------
 
+@pytest.mark.slow
 def test_killed_sweep_resumes_without_loss_or_duplicates(tmp_path):
     with open(tmp_path / "first.log", "w") as log:
         proc = launch(tmp_path, "hydra/launcher=local_parallel", wait=False, log=log)
@@ -191,6 +193,7 @@ def test_killed_sweep_resumes_without_loss_or_duplicates(tmp_path):
 
 # --- failed runs run again -----------------------------------------------------------------------
 
+@pytest.mark.slow
 def test_failed_runs_rerun_and_status_reports_them(tmp_path, capsys):
     mesh = tmp_path / "late.obj"
     args = ["shape.name=file", f"shape.path={mesh}", "+experiment/strategy=random"]  # both models

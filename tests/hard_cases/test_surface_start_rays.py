@@ -91,9 +91,9 @@ def sphere_fits(sphere):
 
 @pytest.mark.parametrize("family", FAMILIES)
 def test_offset_rays_leaving_the_surface_do_not_self_hit(sphere_fits, family):
-    """BUG (ddf, ddfbench/models/ddf.py, DDF.intersect): a few rays (3 of 1500 after a 4 s fit) leaving the
-    surface get a visible hit with a predicted distance <= 0, clamped to t = 0: the network answers for
-    the surface the query point stands on."""
+    """Shadow rays leaving a surface point (started ray_offset out along the normal) report no hit
+    nearer than ray_offset, for every family: no answer for the surface the ray leaves (the DDF once
+    gave a few such rays t = 0)."""
     rep = sphere_fits[family]
     p, n = camera_hits(rep, 1500, seed=1)
     assert len(p) > 300, f"{family}: the quick fit hit only {len(p)} of 1500 camera rays"
@@ -108,9 +108,8 @@ def test_offset_rays_leaving_the_surface_do_not_self_hit(sphere_fits, family):
 
 
 def test_mesh_rays_started_exactly_on_the_surface(sphere):
-    """BUG (ddfbench/models/mesh.py, MeshFamily.intersect; the oracle's first_hit has no t_near): a ray
-    started exactly on a facet reports that facet at t ~ 1e-10 for about half the outward directions
-    and a start on the surface going inward stops at t ~ 0 instead of the far side."""
+    """The mesh family's rays started exactly on a facet skip that facet: going outward they miss the
+    sphere, going inward they stop at the far side within 1e-4 (not at t ~ 0 on the facet they start on)."""
     rep = load_family("mesh")({"faces": 0})
     rep.fit(FitData(None, sphere.mesh, None), Budget())
     mesh = sphere.mesh
