@@ -15,6 +15,8 @@ from typing import Any, Callable, ClassVar, Mapping
 import numpy as np
 import trimesh
 
+from ddfbench import plugins
+
 
 class RayStatus(enum.IntEnum):
     """Outcome of one ray query."""
@@ -90,22 +92,30 @@ Probe = Callable[["Representation"], dict[str, float]]
 class Representation(abc.ABC):
     """A shape family. Subclass in `ddfbench/models/<family>.py` and expose it as `FAMILY`.
 
-    cfg is the `model` config node as a plain dict; domain is the half-side of the field box.
-    `sample_kind` says what training samples fit wants: "rays" (x, d, t, hit), "sdf" (x, sdf) or None.
+    cfg is the `model` config node as a plain dict, checked and completed by `configure` (the family's
+    conf/model/<family>.yaml is the one source of its defaults); domain is the half-side of the field box.
+    `sample_kind` says what training samples fit wants: "rays" (x, d, t, hit), "sdf" (x, sdf) or None
+    (the runner then builds none). `learned` says fit trains something (fit curves, training benches).
     `needs_closed_surface` says its labels rely on a sensible inside/outside (flagged on open meshes).
     """
 
     family: ClassVar[str] = "abstract"
     sample_kind: ClassVar[str | None] = None
+    learned: ClassVar[bool] = False
     # True where training signs come from the inside test: an open input is then flagged in the record.
     needs_closed_surface: ClassVar[bool] = False
 
     def __init__(self, cfg: Mapping[str, Any], domain: float = 0.6):
-        self.cfg = dict(cfg)
+        self.cfg = self.configure(cfg)
         self.domain = float(domain)
         self._saved_path: str | None = None
         # what the last to_mesh reported (ddfbench.extract info: field_evals, capped, empty, ...); {} if nothing
         self.extract_info: dict[str, Any] = {}
+
+    @classmethod
+    def configure(cls, cfg: Mapping[str, Any]) -> dict[str, Any]:
+        """The family's YAML defaults overlaid by cfg; an unknown key or a mistyped value is a one-line InputError."""
+        return plugins.family_config(cls.family, cfg)
 
     @abc.abstractmethod
     def fit(self, data: "FitData", budget: Budget, probe: Probe | None = None) -> FitStats:

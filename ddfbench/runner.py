@@ -17,7 +17,7 @@ from typing import Any, Mapping
 import numpy as np
 import torch
 
-from ddfbench import runs
+from ddfbench import plugins, runs
 from ddfbench.errors import InputError
 from ddfbench.metrics import cloud_metrics, geometry_metrics, penalty_metrics, sample_surface
 from ddfbench.models import load_family
@@ -72,12 +72,16 @@ def _stages(cfg: Mapping[str, Any], rdir: str, device: str, seed: int, out: dict
     shape.mesh.export(os.path.join(rdir, "gt_mesh.ply"), file_type="ply", encoding="binary")
     artifacts["gt_mesh"] = "gt_mesh.ply"
 
-    cache_dir = os.path.join(cfg.get("out_dir", "results"), ".cache", "datasets")
-    kind = Family.sample_kind or "rays"
-    samples, dataset_path, info = sampling.build(shape, oracle, dict(cfg["sampling"]), kind, seed, cache_dir)
-    out["sampling"] = {**dict(cfg["sampling"]), **info}
-    cost["sampling_s"] = float(info.get("sampling_s", 0.0))
-    artifacts["dataset"] = os.path.relpath(dataset_path, rdir)
+    samples = None
+    if Family.sample_kind is None:  # the family builds from the mesh: no samples, no sampling time or count
+        out["sampling"] = {**dict(cfg["sampling"]), "kind": None}
+    else:
+        cache_dir = os.path.join(cfg.get("out_dir", "results"), ".cache", "datasets")
+        samples, dataset_path, info = sampling.build(shape, oracle, dict(cfg["sampling"]), Family.sample_kind, seed,
+                                                     cache_dir)
+        out["sampling"] = {**dict(cfg["sampling"]), **info}
+        cost["sampling_s"] = float(info.get("sampling_s", 0.0))
+        artifacts["dataset"] = os.path.relpath(dataset_path, rdir)
 
     ev, tr = cfg["eval"], cfg["train"]
     radii = [float(r) for r in ev["radii"]]
@@ -143,10 +147,14 @@ def run(cfg: Mapping[str, Any], choices: Mapping[str, str] | None = None,
         overrides: list[str] | None = None, device: str | None = None) -> dict[str, Any]:
     """Run one job from a resolved config (plain dict); return its record (also written to disk).
 
+    The levels the config asks for (capacity, sample_size) are applied first (plugins.job_config), so
+    the record key and the record's config are those of the job as it runs.
+
     choices: Hydra's config-group choices (the record's `model` label); device: the job's device as
     the launcher gives it (ddfbench.launch.job_device); None means train.device.
     """
     choices = dict(choices or {})
+    cfg = plugins.job_config(cfg)
     experiment = str(cfg.get("experiment_name", "single"))
     key = runs.config_key(cfg)
     rdir = runs.run_dir(str(cfg.get("out_dir", "results")), experiment, key)

@@ -18,7 +18,7 @@ from ddfbench.samples import Samples
 
 R0 = 0.4
 CONF = os.path.join(os.path.dirname(__file__), "..", "conf", "model")
-SMALL = {"width": 128, "depth": 3, "pos_freqs": 4, "dir_freqs": 2, "batch_size": 2048, "lr": 3e-3, "vis_weight": 0.1,
+SMALL = {"width": 128, "depth": 3, "pos_freqs": 4, "dir_freqs": 2, "batch": 2048, "lr": 3e-3, "vis_weight": 0.1,
          "udf_directions": 16, "eval_batch": 16384}
 
 
@@ -268,7 +268,7 @@ def test_load_rejects_foreign_and_broken_artifacts(tmp_path):
 def test_paper_preset_builds_and_trains_a_few_steps(sphere_oracle):
     mesh, oracle = sphere_oracle
     cfg = OmegaConf.to_container(OmegaConf.load(os.path.join(CONF, "ddf_paper.yaml")))
-    rep = DDF({**cfg, "batch_size": 256})
+    rep = DDF({**cfg, "batch": 256})
     wn = [m for m in rep.net.modules() if isinstance(m, torch.nn.Linear) and hasattr(m, "parametrizations")]
     drop = [m for m in rep.net.modules() if isinstance(m, torch.nn.Dropout)]
     assert len(wn) == 8 and len(drop) == 8 and all(m.out_features == 512 for m in wn)

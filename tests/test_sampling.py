@@ -11,7 +11,6 @@ from ddfbench.errors import InputError
 from ddfbench.oracle import Oracle
 from ddfbench.samples import Samples
 from ddfbench.sampling import available_strategies, build
-from ddfbench.sampling.box import box_interval
 from ddfbench.sampling.collect import Collector
 from ddfbench.sampling.directions import paper_eq10_directions, random_perpendicular, uniform_directions
 from ddfbench.sampling.steps import marching_distances
@@ -136,19 +135,6 @@ def test_marching_distances_stay_in_range_and_ascend(rng, rule):
     assert np.all(t >= 1e-3) and np.all(t <= hi[:, None] + 1e-12) and np.all(np.diff(t, axis=1) >= 0)
     if rule == "geometric":  # half the samples within the geometric middle of the range
         assert np.mean(t[:, 3] < np.sqrt(1e-3 * hi)) > 0.3
-
-
-def test_box_interval_matches_a_brute_force_march(rng):
-    o = rng.uniform(-1, 1, (200, 3))
-    d = uniform_directions(rng, 200).astype(np.float64)
-    t_in, t_out = box_interval(o, d, -0.5, 0.5)
-    s = np.linspace(-4, 4, 8001)
-    inside = np.all(np.abs(o[:, None] + s[None, :, None] * d[:, None]) <= 0.5, axis=2)
-    for i in range(200):
-        if inside[i].any():
-            assert abs(s[inside[i]].min() - t_in[i]) < 2e-3 and abs(s[inside[i]].max() - t_out[i]) < 2e-3
-        else:
-            assert t_in[i] > t_out[i]
 
 
 def test_face_plan_skips_zero_area_faces(rng):

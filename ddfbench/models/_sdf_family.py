@@ -85,6 +85,7 @@ class NetSDFFamily(SDFFamily):
     """An SDF family whose field is the torch module `self.net` (built by the subclass's __init__ from cfg)."""
 
     net: torch.nn.Module
+    learned = True
 
     def field(self, points: torch.Tensor) -> torch.Tensor:
         return self.net(points)

@@ -25,7 +25,7 @@ cfg keys (conf/model/ddf.yaml documents each):
             hit where the clamped distance stays below clamp_hit_ratio * delta, as in the paper)
   loss      loss ("l1" | "clamp" with delta), vis_weight, entry_share (share of each batch drawn
             from line_entry_labels, visibility only, half hits and half misses; none unless the
-            samples give both), batch_size, lr, weight_decay,
+            samples give both), batch, lr, weight_decay,
             lr_schedule / lr_final_ratio / lr_warmup (ddfbench.train.Schedule), grad_clip
   mesh      mesh_field ("signed" | "udf"); signed: mesh_directions (K on the coarsest lattice),
             mesh_keep (lines per finer node), mesh_band (truncation, unit-cube units), mesh_rank
@@ -50,22 +50,13 @@ import torch
 import trimesh
 from torch import nn
 
+from ddfbench import plugins
 from ddfbench.errors import InputError
 from ddfbench.extract import sdf_to_mesh, udf_to_mesh
+from ddfbench.geometry import FourierFeatures, ray_box
 from ddfbench.representation import Budget, FitData, FitStats, Hits, Probe, RayStatus, Representation
 from ddfbench.train import Schedule, seed_everything, train_loop
 
-DEFAULTS: dict[str, Any] = {
-    "width": 128, "depth": 4, "activation": "relu", "weight_norm": False, "dropout": 0.0,
-    "direction": "vector", "param": "ray", "pos_freqs": 8, "dir_freqs": 4,
-    "visibility": "head", "loss": "l1", "delta": 1.0, "clamp_hit_ratio": 0.95, "vis_weight": 1.0,
-    "entry_share": 0.25, "batch_size": 2048, "lr": 3e-3, "weight_decay": 0.0, "lr_schedule": "cosine",
-    "lr_final_ratio": 0.01, "lr_warmup": 0.0, "grad_clip": 1.0,
-    "mesh_field": "signed", "mesh_directions": 32, "mesh_keep": 12, "mesh_band": 0.02, "mesh_rank": 3, "mesh_coarse": 8,
-    "mesh_lipschitz": 1.0,
-    "udf_directions": 16, "udf_rank": 3, "udf_level_steps": 0.75, "udf_coarse": 4, "udf_lipschitz": 1.5, "udf_project": True,
-    "storage_dtype": "float32", "eval_batch": 65536, "min_hit_distance": 1e-3,
-}
 # Normals in intersect: a chunk whose hit share reaches this runs one backward over all its rays rather
 # than a second forward + backward over its hits. Measured on CPU for the default preset (1 thread,
 # 65k rays): forward with grad 0.33-0.44 s, backward 0.35-0.41 s, so one pass wins above a share of
@@ -86,17 +77,13 @@ def fibonacci_directions(k: int) -> np.ndarray:
 
 
 def box_entry(origins: np.ndarray, directions: np.ndarray, half: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Slab test against [-half, half]^3 for rays (N,3),(N,3).
+    """geometry.ray_box against [-half, half]^3 for rays (N,3),(N,3), from t = 0 on.
 
-    Returns t_entry (N,) (0 for origins inside), t_exit (N,), and inside (N,) bool: the ray meets the box.
+    Returns t_entry (N,) (0 for origins inside), t_exit (N,), both float32, and meets (N,) bool.
     """
-    with np.errstate(divide="ignore", invalid="ignore"):
-        inv = 1.0 / directions
-        t0, t1 = (-half - origins) * inv, (half - origins) * inv
-    lo = np.where(np.isnan(t0), -np.inf, np.minimum(t0, t1)).max(1)  # nan: parallel ray on a slab face
-    hi = np.where(np.isnan(t1), np.inf, np.maximum(t0, t1)).min(1)
-    t_entry = np.maximum(lo, 0.0)
-    return t_entry.astype(np.float32), hi.astype(np.float32), hi >= t_entry
+    enter, leave = ray_box(origins, directions, half)
+    t_entry = np.maximum(enter, 0.0)
+    return t_entry.astype(np.float32), leave.astype(np.float32), leave >= t_entry
 
 
 def unit_normals(grad: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -152,30 +139,13 @@ def line_entry_labels(x: np.ndarray, d: np.ndarray, hit: np.ndarray, half: float
     return xs - back[:, None] * ds, ds, np.asarray(hit[rows], bool)
 
 
-class PositionalEncoding(nn.Module):
-    """v (N, c) -> [v, sin(2^k pi v), cos(2^k pi v) for k < n_freqs] (N, c (1 + 2 n_freqs))."""
-
-    def __init__(self, n_freqs: int):
-        super().__init__()
-        self.register_buffer("freqs", math.pi * 2.0 ** torch.arange(int(n_freqs)), persistent=False)
-
-    def out_dim(self, c: int) -> int:
-        return c * (1 + 2 * len(self.freqs))
-
-    def forward(self, v: torch.Tensor) -> torch.Tensor:
-        if len(self.freqs) == 0:
-            return v
-        a = (v[..., None] * self.freqs).flatten(-2)
-        return torch.cat([v, torch.sin(a), torch.cos(a)], -1)
-
-
 class DDFNet(nn.Module):
     """phi(x, d) for x (N,3), unit d (N,3) -> (distance (N,), visibility logit (N,) or None)."""
 
     def __init__(self, cfg: Mapping[str, Any]):
         super().__init__()
         self.param, self.direction = cfg["param"], cfg["direction"]
-        self.pos_pe, self.dir_pe = PositionalEncoding(cfg["pos_freqs"]), PositionalEncoding(cfg["dir_freqs"])
+        self.pos_pe, self.dir_pe = FourierFeatures(cfg["pos_freqs"], math.pi), FourierFeatures(cfg["dir_freqs"], math.pi)
         n_pos = self.pos_pe.out_dim(4 if self.param == "ray" else 3)
         n_dir = self.dir_pe.out_dim(3 if self.direction == "vector" else 2)
         n_out = 2 if cfg["visibility"] == "head" else 1
@@ -207,11 +177,12 @@ class DDFNet(nn.Module):
 
 
 def _resolved(cfg: Mapping[str, Any]) -> dict[str, Any]:
-    out = {**DEFAULTS, **{k: v for k, v in cfg.items() if k != "family"}}
+    """conf/model/ddf.yaml overlaid by cfg (strict, see ddfbench.plugins), with the values checked."""
+    out = plugins.family_config("ddf", cfg)
     for key, allowed in _CHOICES.items():
         if out[key] not in allowed:
             raise InputError(f"model.{key} '{out[key]}': unknown (one of {', '.join(allowed)})")
-    for key in ("width", "depth", "batch_size", "udf_directions", "udf_rank", "eval_batch", "mesh_directions",
+    for key in ("width", "depth", "batch", "udf_directions", "udf_rank", "eval_batch", "mesh_directions",
                 "mesh_keep", "mesh_rank", "mesh_coarse"):
         if int(out[key]) < 1:
             raise InputError(f"model.{key} {out[key]}: must be a positive integer")
@@ -233,6 +204,7 @@ class DDF(Representation):
 
     family = "ddf"
     sample_kind = "rays"
+    learned = True
     needs_closed_surface = True  # surface sampling rejects inward rays by the odd-even rule; the mesh is a signed field
 
     def __init__(self, cfg: Mapping[str, Any], domain: float = 0.6):
@@ -453,8 +425,8 @@ class DDF(Representation):
         xe, de, he = (torch.as_tensor(a, device=dev) for a in line_entry_labels(s.x, s.d, s.hit, self.domain))
         n_hit_entries = int(he.sum())
         both = 0 < n_hit_entries < len(he)  # one class alone would only bias the head: then none
-        n_entry = 2 * int(round(float(cfg["entry_share"]) * int(cfg["batch_size"]) / 2)) if both and cfg["visibility"] == "head" else 0
-        n_main = int(cfg["batch_size"]) - n_entry
+        n_entry = 2 * int(round(float(cfg["entry_share"]) * int(cfg["batch"]) / 2)) if both and cfg["visibility"] == "head" else 0
+        n_main = int(cfg["batch"]) - n_entry
         order = torch.argsort((~he).to(torch.uint8), stable=True)  # entry hits first, then misses
         xe, de, he = xe[order], de[order], he[order]
 

@@ -33,7 +33,7 @@ QUICK = {
     "grid_sdf": {"resolution": 48, "build": "levelset"},
     "neural_sdf": {"width": 64, "depth": 3, "batch": 2048, "lr": 3e-3},
     "gan_sdf": {"batch": 128, "w_anchor": 1.0, "trace": {"max_steps": 64}},  # ~2 MFLOP per field evaluation
-    "ddf": {"width": 128, "depth": 3, "pos_freqs": 4, "dir_freqs": 2, "batch_size": 2048, "lr": 3e-3,
+    "ddf": {"width": 128, "depth": 3, "pos_freqs": 4, "dir_freqs": 2, "batch": 2048, "lr": 3e-3,
             "udf_directions": 8, "mesh_directions": 16},
 }
 SURFACE_SAMPLING = {"strategy": "surface", "face_mode": "total", "s_fc": 40, "s_dr": 4, "s_p": 4,
