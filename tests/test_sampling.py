@@ -5,8 +5,8 @@ import os
 import numpy as np
 import pytest
 import trimesh
-import yaml
 
+from ddfbench import plugins
 from ddfbench.errors import InputError
 from ddfbench.oracle import Oracle
 from ddfbench.samples import Samples
@@ -17,13 +17,12 @@ from ddfbench.sampling.steps import marching_distances
 from ddfbench.sampling.triangles import barycentric, face_plan
 from ddfbench.shapes import Shape, load_shape
 
-CONF = os.path.join(os.path.dirname(__file__), "..", "conf", "sampling")
 
 
 def config(strategy, **overrides):
-    """conf/sampling/<strategy>.yaml with the field box resolved and overrides applied."""
-    with open(os.path.join(CONF, f"{strategy}.yaml")) as f:
-        cfg = yaml.safe_load(f)
+    """conf/sampling/<strategy>.yaml (its config, not the experiments it joins) with the field box
+    resolved and overrides applied."""
+    cfg = plugins.defaults("sampling", strategy)
     cfg["box"] = 0.6
     cfg.update(overrides)
     return cfg
