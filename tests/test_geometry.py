@@ -68,9 +68,11 @@ def test_pinhole_rays_look_at_the_target_and_span_the_field_of_view():
     assert np.allclose(np.linalg.norm(d, axis=1), 1.0) and (d[:, 2] < 0).all()
     grid = d.reshape(3, 4, 3)
     assert grid[0, 0, 1] > 0 > grid[2, 0, 1] and grid[0, 0, 0] < 0 < grid[0, 3, 0]  # row 0 on top, column 0 left
-    # the top and bottom rows' centres sit (height-1)/height of the way to the half field of view
-    top = math.degrees(math.atan2(grid[0, :, 1].mean(), 1.0)) if False else math.atan(-grid[0, 1, 1] / grid[0, 1, 2])
-    assert math.tan(abs(top)) == pytest.approx(math.tan(math.radians(30)) * (1 - 1 / 3), rel=1e-6)
+    # the image plane at distance 1: row 0's centre at y = (1 - 1/height) tan(fov/2), column 0's at
+    # x = -(1 - 1/width) tan(fov/2) width/height
+    plane = grid / -grid[..., 2:]
+    assert plane[0, 0, 1] == pytest.approx((1 - 1 / 3) * math.tan(math.radians(30)), rel=1e-9)
+    assert plane[0, 0, 0] == pytest.approx(-(1 - 1 / 4) * math.tan(math.radians(30)) * 4 / 3, rel=1e-9)
 
 
 def test_fourier_features_layout():
