@@ -26,6 +26,7 @@ import numpy as np
 import trimesh
 
 from ddfbench.errors import InputError
+from ddfbench.geometry import BOX_HALF
 
 # name -> file below the pymeshlab sample folder
 PYMESHLAB_SAMPLES = {
@@ -46,7 +47,7 @@ def pymeshlab_samples_dir() -> str:
     return os.path.join(os.path.dirname(pymeshlab.__file__), "tests", "sample_meshes")
 
 
-def grid_step(resolution: int, domain: float = 0.6) -> float:
+def grid_step(resolution: int, domain: float = BOX_HALF) -> float:
     """Node spacing of a resolution^3 grid over [-domain, domain]^3 (extract.grid_axis's spacing)."""
     return 2.0 * float(domain) / (int(resolution) - 1)
 
@@ -64,7 +65,7 @@ def one_triangle() -> trimesh.Trimesh:
 
 
 def thin_plate(thickness: float | None = None, voxels: float | None = None, resolution: int = 64,
-               domain: float = 0.6) -> trimesh.Trimesh:
+               domain: float = BOX_HALF) -> trimesh.Trimesh:
     """A closed 1 x 1 x thickness box centred at the origin (thickness = voxels * grid_step if given; default 0.02)."""
     if thickness is not None and voxels is not None:
         raise InputError(f"hard/thin_plate: give thickness ({thickness}) or voxels ({voxels}), not both")

@@ -16,6 +16,7 @@ import numpy as np
 import trimesh
 
 from ddfbench import plugins
+from ddfbench.geometry import BOX_HALF
 
 
 class RayStatus(enum.IntEnum):
@@ -105,7 +106,7 @@ class Representation(abc.ABC):
     # True where training signs come from the inside test: an open input is then flagged in the record.
     needs_closed_surface: ClassVar[bool] = False
 
-    def __init__(self, cfg: Mapping[str, Any], domain: float = 0.6):
+    def __init__(self, cfg: Mapping[str, Any], domain: float = BOX_HALF):
         self.cfg = self.configure(cfg)
         self.domain = float(domain)
         self._saved_path: str | None = None
@@ -136,7 +137,7 @@ class Representation(abc.ABC):
 
     @classmethod
     @abc.abstractmethod
-    def load(cls, path: str, domain: float = 0.6) -> "Representation":
+    def load(cls, path: str, domain: float = BOX_HALF) -> "Representation":
         """Read an artifact written by save (models: torch.load(weights_only=True))."""
 
     def _publish(self, tmp: str, path: str) -> str:

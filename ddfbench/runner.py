@@ -19,6 +19,7 @@ import torch
 
 from ddfbench import plugins, runs
 from ddfbench.errors import InputError
+from ddfbench.geometry import BOX_HALF
 from ddfbench.metrics import cloud_metrics, geometry_metrics, penalty_metrics, sample_surface
 from ddfbench.models import load_family
 from ddfbench.oracle import Oracle
@@ -85,7 +86,7 @@ def _stages(cfg: Mapping[str, Any], rdir: str, device: str, seed: int, out: dict
 
     ev, tr = cfg["eval"], cfg["train"]
     radii = [float(r) for r in ev["radii"]]
-    domain = float(cfg.get("domain", 0.6))
+    domain = float(cfg.get("domain", BOX_HALF))
     rep = Family(dict(cfg["model"]), domain=domain)
     budget = Budget(max_steps=int(tr["max_steps"]), max_seconds=float(tr["max_seconds"]), device=device,
                     seed=seed, n_probes=int(tr.get("n_probes", 5)))

@@ -83,3 +83,11 @@ def test_fourier_features_layout():
     a = torch.tensor([0.25 * math.pi, 0.5 * math.pi, -0.5 * math.pi, -1.0 * math.pi])  # channel-major
     assert torch.allclose(out, torch.cat([v[0], torch.sin(a), torch.cos(a)])[None], atol=1e-6)
     assert torch.equal(FourierFeatures(0, 1.0)(v), v)
+
+
+def test_the_configs_field_box_is_box_half():
+    from omegaconf import OmegaConf
+
+    from ddfbench import CONF_DIR
+
+    assert OmegaConf.load(f"{CONF_DIR}/config.yaml").domain == BOX_HALF

@@ -8,10 +8,11 @@ from typing import Any
 from omegaconf import OmegaConf
 
 from ddfbench import plugins
+from ddfbench.geometry import BOX_HALF
 from ddfbench.oracle import Oracle
 from ddfbench.shapes import Shape, load_shape
 
-DOMAIN = 0.6  # conf/config.yaml `domain`: half-side of the field box
+DOMAIN = BOX_HALF  # conf/config.yaml `domain`: half-side of the field box
 
 
 def preset(group: str, name: str, **overrides: Any) -> dict[str, Any]:

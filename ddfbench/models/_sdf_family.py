@@ -21,6 +21,7 @@ import trimesh
 
 from ddfbench import extract
 from ddfbench.errors import InputError
+from ddfbench.geometry import BOX_HALF
 from ddfbench.representation import Hits, Representation
 from ddfbench.trace import TraceOptions, autograd_normals, sphere_trace, to_hits
 
@@ -32,7 +33,7 @@ class SDFFamily(Representation):
 
     needs_closed_surface = True  # signs come from the inside test
 
-    def __init__(self, cfg: Mapping[str, Any], domain: float = 0.6):
+    def __init__(self, cfg: Mapping[str, Any], domain: float = BOX_HALF):
         super().__init__(cfg, domain)
         self.trace_options = TraceOptions.from_cfg(self.cfg)
         self.device = "cpu"
@@ -109,7 +110,7 @@ class NetSDFFamily(SDFFamily):
         return self._publish(tmp, path)
 
     @classmethod
-    def load(cls, path: str, domain: float = 0.6) -> "NetSDFFamily":
+    def load(cls, path: str, domain: float = BOX_HALF) -> "NetSDFFamily":
         try:
             blob = torch.load(path, map_location="cpu", weights_only=True)
             header = json.loads(blob["header"])

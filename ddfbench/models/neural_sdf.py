@@ -27,7 +27,7 @@ import torch
 from torch import nn
 
 from ddfbench.errors import InputError
-from ddfbench.geometry import FourierFeatures
+from ddfbench.geometry import BOX_HALF, FourierFeatures
 from ddfbench.models._sdf_family import NetSDFFamily
 from ddfbench.representation import Budget, FitData, FitStats, Probe
 from ddfbench.train import Schedule, seed_everything, train_loop
@@ -93,7 +93,7 @@ class NeuralSDF(NetSDFFamily):
     family = "neural_sdf"
     sample_kind = "sdf"
 
-    def __init__(self, cfg: Mapping[str, Any], domain: float = 0.6):
+    def __init__(self, cfg: Mapping[str, Any], domain: float = BOX_HALF):
         super().__init__(cfg, domain)
         self.net = self._new_net()
 

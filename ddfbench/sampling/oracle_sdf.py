@@ -9,11 +9,12 @@ from __future__ import annotations
 
 import numpy as np
 
+from ddfbench.geometry import BOX_HALF
 from ddfbench.oracle import Oracle
 from ddfbench.samples import Samples
 
 
-def oracle_sdf_samples(mesh, oracle: Oracle, n: int, seed: int, domain: float = 0.6) -> Samples:
+def oracle_sdf_samples(mesh, oracle: Oracle, n: int, seed: int, domain: float = BOX_HALF) -> Samples:
     """n SDF samples labelled by the oracle: 45% surface + N(0, 0.005), 45% surface + N(0, 0.03), 10% uniform in the box."""
     rng = np.random.default_rng(seed)
     n_near = int(0.45 * n)
