@@ -75,7 +75,7 @@ def _stages(cfg: Mapping[str, Any], rdir: str, device: str, seed: int, out: dict
 
     samples = None
     if Family.sample_kind is None:  # the family builds from the mesh: no samples, no sampling time or count
-        out["sampling"] = {**dict(cfg["sampling"]), "kind": None}
+        out["sampling"] = {"strategy": None, "kind": None}  # (the sampler's unused config stays in record.config)
     else:
         cache_dir = os.path.join(cfg.get("out_dir", "results"), ".cache", "datasets")
         samples, dataset_path, info = sampling.build(shape, oracle, dict(cfg["sampling"]), Family.sample_kind, seed,

@@ -16,6 +16,7 @@ from ddfbench import CONF_DIR, plugins
 from ddfbench.report.plots import PLOTS_BY_EXPERIMENT
 from ddfbench.report.status import expected_grid
 from ddfbench.errors import InputError
+from ddfbench.models import load_family
 from ddfbench.runs import RECORD_FIELDS, find_records
 
 FAMILIES = set(plugins.members("model", "smoke"))  # every model with a smoke level (the ddf_paper preset included)
@@ -130,10 +131,12 @@ def test_smoke_runs_every_family_and_strategy_and_reports(tmp_path):
         assert set(RECORD_FIELDS) <= set(rec)
         assert rec["status"] == "ok", (rec["key"], rec["error"])
     assert {r["model"] for r in records} == FAMILIES  # the ddf_paper preset is family ddf
-    assert {r["sampling"]["strategy"] for r in records} == SAMPLERS
+    assert {r["sampling"]["strategy"] for r in records} == SAMPLERS | {None}  # None: a family that needs no samples
+    assert all(load_family(f).sample_kind is None for f in ("mesh", "grid_sdf"))
     for rec in records:  # a family that builds from the mesh gets no samples, and its record says so
-        no_samples = rec["family"] in ("mesh", "grid_sdf")
+        no_samples = load_family(rec["family"]).sample_kind is None
         assert no_samples == (rec["sampling"]["kind"] is None) == ("sampling_s" not in rec["cost"]), rec["key"]
+        assert no_samples == ("n_samples" not in rec["sampling"]), rec["key"]
 
     out = tmp_path / "report"
     rep = subprocess.run([sys.executable, "-m", "ddfbench.report", str(tmp_path / "smoke"), "--out", str(out)],

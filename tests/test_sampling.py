@@ -239,3 +239,19 @@ def test_zero_area_faces_of_an_unvalidated_mesh_are_never_sampled(rng, tmp_path)
     samples, _, info = build(shape, Oracle(mesh), cfg, "rays", 0, str(tmp_path))
     assert info["n_points"] == 5 * 12
     recheck_rays(shape, samples, rng)
+
+
+def _build_in_process(cache_dir):
+    shape = load_shape({"name": "sphere"})
+    return build(shape, Oracle(shape.mesh), config("random", n_samples=20000), "rays", 0, cache_dir)[1]
+
+
+def test_two_processes_building_one_dataset_leave_one_complete_file(tmp_path):
+    """Two runs that need the same dataset at once (a sweep under a parallel launcher) both build it;
+    the cache ends with one complete file and no temporaries."""
+    import multiprocessing
+
+    with multiprocessing.get_context("spawn").Pool(2) as pool:
+        paths = pool.map(_build_in_process, [str(tmp_path)] * 2)
+    assert paths[0] == paths[1] and os.listdir(tmp_path) == [os.path.basename(paths[0])]
+    assert len(Samples.load_npz(paths[0])) == 20000
