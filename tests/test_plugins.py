@@ -108,3 +108,16 @@ def test_a_copied_family_and_sampler_join_the_experiments_and_the_report(tmp_pat
     assert ddf_row["n_samples_mean"] > 0 and ddf_row["sampling_s_mean"] > 0  # the copied sampler made its labels
     grid_row = rows[rows["model"] == "grid_copy"].iloc[0]
     assert pd.isna(grid_row["n_samples_mean"]) and pd.isna(grid_row["sampling_s_mean"])  # a grid needs none
+
+
+def test_command_line_overrides_are_checked_against_the_named_plugin():
+    from ddfbench.cli import checked_overrides
+
+    # a key the preset leaves to its family's YAML is added (Hydra would refuse `model.entry_share=` on it)
+    assert checked_overrides(["model=ddf_paper", "model.entry_share=0.3", "seed=1"]) == \
+        ["model=ddf_paper", "++model.entry_share=0.3", "seed=1"]
+    assert checked_overrides(["model=ddf", "model.width=64"]) == ["model=ddf", "model.width=64"]
+    with pytest.raises(InputError, match=r"^sampling.n_sampels: unknown key \(known: .*n_samples"):
+        checked_overrides(["sampling=random", "sampling.n_sampels=5"])
+    with pytest.raises(InputError, match=r"^model.faces: unknown key"):
+        checked_overrides(["model=ddf", "model.faces=5"])  # a mesh key, not a DDF's
