@@ -4,9 +4,9 @@ import numpy as np
 import pytest
 import torch
 
-from ddfbench.shapes import HARD_CASES
+from ddfbench import plugins
 from ddfbench.models import available_families
-from ddfbench.shapes import Shape, load_shape
+from ddfbench.shapes import HARD_CASES, Shape, load_shape
 
 torch.set_num_threads(1)
 
@@ -67,7 +67,8 @@ def assert_well_formed(t, hit, normal):
 
 
 def compose(*overrides: str, out_dir) -> dict:
-    """The resolved run config (plain dict) for CLI-style overrides, as `python -m ddfbench` would build it."""
+    """The resolved run config (plain dict) for CLI-style overrides, as `python -m ddfbench` would build it
+    (plugins.job_config: the plugins' experiments parts dropped, as the runner does first)."""
     import os
 
     from hydra import compose as hydra_compose, initialize_config_dir
@@ -77,4 +78,4 @@ def compose(*overrides: str, out_dir) -> dict:
     with initialize_config_dir(config_dir=os.path.abspath(conf), version_base="1.3"):
         cfg = hydra_compose("config", overrides=["scene=none", "eval=smoke", "threads=1", f"out_dir={out_dir}",
                                                  *overrides])
-    return OmegaConf.to_container(cfg, resolve=True)
+    return plugins.job_config(OmegaConf.to_container(cfg, resolve=True))
