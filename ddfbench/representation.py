@@ -8,7 +8,9 @@ from __future__ import annotations
 
 import abc
 import enum
+import json
 import os
+import pickle
 from dataclasses import dataclass, field
 from typing import Any, Callable, ClassVar, Mapping
 
@@ -16,6 +18,7 @@ import numpy as np
 import trimesh
 
 from ddfbench import plugins
+from ddfbench.errors import InputError
 from ddfbench.geometry import BOX_HALF
 
 
@@ -145,6 +148,33 @@ class Representation(abc.ABC):
         os.replace(tmp, path)
         self._saved_path = path
         return path
+
+    def _save_network(self, path: str, state: Mapping[str, Any]) -> str:
+        """Save a network family: `<path>.pt` (".pt" added when missing) holding the state dict (name ->
+        tensor) and a JSON header {family, domain, cfg}, written to a temporary file and published."""
+        import torch
+
+        if not path.endswith(".pt"):
+            path = f"{path}.pt"
+        header = {"family": self.family, "domain": self.domain, "cfg": self.cfg}
+        tmp = f"{path}.tmp{os.getpid()}"
+        torch.save({"header": json.dumps(header), "state_dict": dict(state)}, tmp)
+        return self._publish(tmp, path)
+
+    @classmethod
+    def _read_network(cls, path: str) -> tuple[dict[str, Any], dict[str, Any]]:
+        """(header, state dict) of a file written by _save_network (torch.load with weights_only); a
+        one-line InputError when it cannot be read or holds another family."""
+        import torch
+
+        try:
+            blob = torch.load(path, map_location="cpu", weights_only=True)
+            header, state = json.loads(blob["header"]), blob["state_dict"]
+        except (OSError, RuntimeError, KeyError, ValueError, TypeError, pickle.UnpicklingError) as exc:
+            raise InputError(f"{cls.family} artifact {path}: unreadable ({(str(exc) or type(exc).__name__).splitlines()[0]})") from None
+        if header.get("family") != cls.family:
+            raise InputError(f"{cls.family} artifact {path}: holds family {header.get('family')!r}, not {cls.family}")
+        return header, state
 
     def n_params(self) -> int:
         """Number of stored scalars (network parameters, grid cells, vertex coordinates...)."""

@@ -259,7 +259,7 @@ def test_load_rejects_foreign_and_broken_artifacts(tmp_path):
     with pytest.raises(InputError):
         DDF.load(str(tmp_path / "missing"))
     torch.save({}, tmp_path / "empty.pt")
-    with pytest.raises(InputError, match="cannot be read"):
+    with pytest.raises(InputError, match="unreadable"):
         DDF.load(str(tmp_path / "empty.pt"))
     torch.save({"header": '{"family": "mesh", "cfg": {}}', "state_dict": {}}, tmp_path / "foreign.pt")
     with pytest.raises(InputError, match="holds family 'mesh'"):

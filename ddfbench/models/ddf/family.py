@@ -2,16 +2,12 @@
 
 from __future__ import annotations
 
-import json
-import os
-import pickle
 from typing import Any, Mapping
 
 import numpy as np
 import torch
 import trimesh
 
-from ddfbench.errors import InputError
 from ddfbench.geometry import BOX_HALF
 from ddfbench.models.ddf import fit as ddf_fit
 from ddfbench.models.ddf import mesh as ddf_mesh
@@ -199,28 +195,15 @@ class DDF(Representation):
         return int(sum(p.numel() for p in self.net.parameters()))
 
     def save(self, path: str) -> str:
-        """One file <path>.pt: the state dict in storage_dtype and a JSON header (family, domain, cfg),
-        written to a temporary file and published by rename. Returns the file."""
-        if not path.endswith(".pt"):
-            path = f"{path}.pt"
+        """One file <path>.pt: the state dict in storage_dtype and a JSON header (see _save_network)."""
         dtype = torch.float16 if self.cfg["storage_dtype"] == "float16" else torch.float32
-        state = {k: v.detach().to("cpu", dtype) for k, v in self.net.state_dict().items()}
-        header = {"family": self.family, "domain": self.domain, "cfg": self.cfg}
-        tmp = f"{path}.tmp{os.getpid()}"
-        torch.save({"header": json.dumps(header, sort_keys=True), "state_dict": state}, tmp)
-        return self._publish(tmp, path)
+        return self._save_network(path, {k: v.detach().to("cpu", dtype) for k, v in self.net.state_dict().items()})
 
     @classmethod
     def load(cls, path: str, domain: float = BOX_HALF) -> "DDF":
-        try:
-            blob = torch.load(path, map_location="cpu", weights_only=True)
-            header = json.loads(blob["header"])
-        except (OSError, ValueError, RuntimeError, KeyError, TypeError, pickle.UnpicklingError) as err:
-            raise InputError(f"ddf artifact '{path}': cannot be read ({str(err).splitlines()[0] if str(err) else type(err).__name__})") from None
-        if header.get("family") != cls.family:
-            raise InputError(f"ddf artifact '{path}': holds family '{header.get('family')}', not ddf")
+        header, state = cls._read_network(path)
         rep = cls(header["cfg"], float(header.get("domain", domain)))
-        rep.net.load_state_dict({k: v.float() for k, v in blob["state_dict"].items()})
+        rep.net.load_state_dict({k: v.float() for k, v in state.items()})
         rep.net.eval()
         rep._saved_path = path
         return rep

@@ -4,8 +4,6 @@ the box) and the fit loop (distance loss on hits, l1 or the paper's clamp; visib
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 import numpy as np
 import torch
 from torch import nn
@@ -13,11 +11,8 @@ from torch import nn
 from ddfbench.errors import InputError
 from ddfbench.models.ddf.network import DDFNet
 from ddfbench.models.ddf.rays import box_entry
-from ddfbench.representation import Budget, FitData, FitStats, Probe
+from ddfbench.representation import Budget, FitData, FitStats, Probe, Representation
 from ddfbench.train import Schedule, seed_everything, train_loop
-
-if TYPE_CHECKING:
-    from ddfbench.models.ddf.family import DDF
 
 
 def line_entry_labels(x: np.ndarray, d: np.ndarray, hit: np.ndarray, half: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -40,7 +35,7 @@ def line_entry_labels(x: np.ndarray, d: np.ndarray, hit: np.ndarray, half: float
     return xs - back[:, None] * ds, ds, np.asarray(hit[rows], bool)
 
 
-def fit(rep: "DDF", data: FitData, budget: Budget, probe: Probe | None = None) -> FitStats:
+def fit(rep: Representation, data: FitData, budget: Budget, probe: Probe | None = None) -> FitStats:
     """Train rep.net (a fresh DDFNet on budget.device) on ray samples; see the module docstring."""
     s = data.samples
     if s is None or s.d is None or s.t is None or s.hit is None:

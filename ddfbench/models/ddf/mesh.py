@@ -4,15 +4,12 @@ cubes on a coarse-to-fine narrow band (ddfbench.extract)."""
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
 
 import numpy as np
 import trimesh
 
 from ddfbench.extract import sdf_to_mesh, udf_to_mesh
-
-if TYPE_CHECKING:
-    from ddfbench.models.ddf.family import DDF
+from ddfbench.representation import Representation
 
 
 def fibonacci_directions(k: int) -> np.ndarray:
@@ -45,13 +42,13 @@ def line_vote(s: np.ndarray, keep: int, band: float, rank: int) -> tuple[np.ndar
     return value.astype(np.float32), order
 
 
-def vote(rep: "DDF", s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """line_vote with this model's mesh_keep, mesh_band, mesh_rank."""
+def vote(rep: Representation, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """line_vote with the DDF rep's mesh_keep, mesh_band, mesh_rank."""
     c = rep.cfg
     return line_vote(s, int(c["mesh_keep"]), float(c["mesh_band"]), int(c["mesh_rank"]))
 
 
-def mesh_field(rep: "DDF", dirs: np.ndarray):
+def mesh_field(rep: Representation, dirs: np.ndarray):
     """The carry field of to_mesh (see extract.banded_grid): line_vote over all directions (K,3) on
     the first lattice; finer nodes query only the mesh_keep lines their parent found nearest the
     surface (state: their direction indices, (N, mesh_keep) int16)."""
@@ -65,7 +62,7 @@ def mesh_field(rep: "DDF", dirs: np.ndarray):
     return field
 
 
-def to_mesh(rep: "DDF", resolution: int) -> tuple[trimesh.Trimesh, dict]:
+def to_mesh(rep: Representation, resolution: int) -> tuple[trimesh.Trimesh, dict]:
     """Marching cubes of the signed line field at 0 (mesh_field "signed"), or of the UDF shell
     at udf_level_steps grid steps with shell vertices projected if udf_project ("udf", the paper);
     returns the mesh and the extraction info."""
@@ -89,7 +86,7 @@ def to_mesh(rep: "DDF", resolution: int) -> tuple[trimesh.Trimesh, dict]:
     return mesh, info
 
 
-def project(rep: "DDF", mesh: trimesh.Trimesh, max_move: float) -> trimesh.Trimesh:
+def project(rep: Representation, mesh: trimesh.Trimesh, max_move: float) -> trimesh.Trimesh:
     """Move each shell vertex along -normal (towards the surface) onto the predicted hit, when close."""
     v = np.asarray(mesh.vertices, np.float32)
     towards = -np.asarray(mesh.vertex_normals, np.float32)
