@@ -8,6 +8,7 @@ record and the sweep goes on. Nothing here holds module-level state (launchers p
 
 from __future__ import annotations
 
+import logging
 import os
 import sys
 from typing import Any
@@ -35,6 +36,11 @@ def task(cfg: DictConfig) -> str:
     record = runner.run(plain, choices=dict(hc.runtime.choices), overrides=list(hc.overrides.task), device=device)
     with open(os.path.join(hc.runtime.output_dir, KEY_FILE), "w") as fh:
         fh.write(f"{record['experiment']}/{record['key']}\n")
+    if hc.mode == RunMode.MULTIRUN:
+        from ddfbench.progress import job_finished
+
+        if (text := job_finished(os.path.dirname(hc.runtime.output_dir), record)) is not None:
+            print(text, flush=True)
     if hc.mode == RunMode.RUN:
         if not cfg.get("quiet", False):
             print(to_markdown(summarize([record])))
@@ -45,7 +51,17 @@ def task(cfg: DictConfig) -> str:
 
 
 class SweepTableCallback(Callback):
-    """At the end of a sweep, print the table of the records this sweep produced."""
+    """Sweep progress lines (ddfbench.progress) and, at the end of a sweep, the table of its records."""
+
+    def on_multirun_start(self, config: DictConfig, **kwargs: Any) -> None:
+        from ddfbench.progress import count_jobs, start_sweep
+
+        sweeper = config.hydra.sweeper
+        total = count_jobs(list(config.hydra.overrides.task), sweeper.get("params"), sweeper.get("n_trials"))
+        start_sweep(str(config.hydra.sweep.dir), total)
+        if config.get("quiet", False) or os.environ.get("CI"):  # CI logs: only the progress lines
+            for launcher_log in ("hydra", "hydra_plugins"):
+                logging.getLogger(launcher_log).setLevel(logging.WARNING)
 
     def on_multirun_end(self, config: DictConfig, **kwargs: Any) -> None:
         from ddfbench.report.tables import summarize, to_markdown

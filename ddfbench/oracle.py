@@ -1,7 +1,8 @@
 """Ground truth on the normalized mesh: first-hit distance, occupancy, signed distance, closest point.
 
-Backends: "open3d" (RaycastingScene, Embree inside; the default) and "embree"
-(embreex through trimesh; ray casts only, for cross-checking). Occupancy and
+Backends: "open3d" (RaycastingScene, Embree inside; the default), "embree"
+(embreex through trimesh; ray casts only, for cross-checking) and "warp" (NVIDIA
+Warp's BVH on `device`, cpu or cuda; ray casts only; the optional `gpu` extra). Occupancy and
 signed distance always come from open3d: each point casts `occupancy_rays`
 random rays of its own and takes the majority of their odd-even parities, so a
 mesh with holes still gets a sensible inside test (a single ray would flip
@@ -42,12 +43,13 @@ def _tensor(a: np.ndarray) -> o3d.core.Tensor:
 class Oracle:
     """Exact queries against a triangle mesh (N rays or points at a time, float32 results).
 
-    backend: "open3d" or "embree" for ray casts; occupancy_rays: votes per inside test (odd).
+    backend: "open3d", "embree" or "warp" for ray casts; occupancy_rays: votes per inside test (odd);
+    device: where the warp backend casts ("cpu" | "cuda"; the other backends run on the CPU).
     """
 
-    def __init__(self, mesh: trimesh.Trimesh, backend: str = "open3d", occupancy_rays: int = 5):
-        if backend not in ("open3d", "embree"):
-            raise ValueError(f"oracle backend '{backend}': unknown (open3d | embree)")
+    def __init__(self, mesh: trimesh.Trimesh, backend: str = "open3d", occupancy_rays: int = 5, device: str = "cpu"):
+        if backend not in ("open3d", "embree", "warp"):
+            raise ValueError(f"oracle backend '{backend}': unknown (open3d | embree | warp)")
         self.mesh = mesh
         self.backend = backend
         self.occupancy_rays = int(occupancy_rays) | 1
@@ -56,7 +58,11 @@ class Oracle:
             o3d.core.Tensor(_f32(mesh.vertices)), o3d.core.Tensor(np.ascontiguousarray(mesh.faces, dtype=np.uint32))
         )
         self._face_normals = _f32(mesh.face_normals)
-        self._embree = None
+        self._embree = self._warp = None
+        if backend == "warp":
+            from ddfbench.warp_cast import WarpCaster
+
+            self._warp = WarpCaster(mesh.vertices, mesh.faces, device)
         if backend == "embree":
             from trimesh.ray.ray_pyembree import RayMeshIntersector
 
@@ -87,6 +93,9 @@ class Oracle:
         t = np.full(n, np.inf, np.float32)
         tri = np.full(n, -1, np.int64)
         normal = np.zeros((n, 3), np.float32) if normals else None
+        if self._warp is not None:
+            t, tri, normal = self._warp.cast(origins, directions)
+            return t, tri, normal if normals else None
         if self._embree is None:
             for sl, rays in _ray_chunks(origins, directions):
                 ans = self._scene.cast_rays(rays)

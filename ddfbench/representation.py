@@ -176,6 +176,19 @@ class Representation(abc.ABC):
             raise InputError(f"{cls.family} artifact {path}: holds family {header.get('family')!r}, not {cls.family}")
         return header, state
 
+    def to(self, device: str) -> "Representation":
+        """Move what this representation computes with (its torch modules and tensors) to `device`
+        ("cpu" | "cuda[:k]") and answer there from now on; returns self."""
+        import torch
+
+        for name, value in list(vars(self).items()):
+            if isinstance(value, torch.nn.Module):
+                value.to(device)
+            elif isinstance(value, torch.Tensor):
+                setattr(self, name, value.to(device))
+        self.device = device
+        return self
+
     def n_params(self) -> int:
         """Number of stored scalars (network parameters, grid cells, vertex coordinates...)."""
         return 0

@@ -25,6 +25,7 @@ from ddfbench.models import load_family
 from ddfbench.oracle import Oracle
 from ddfbench.representation import Budget, FitData, Representation
 from ddfbench.shapes import load_shape
+from ddfbench.tracking import track_record
 from ddfbench.train import resolve_device, seed_everything
 
 log = logging.getLogger(__name__)
@@ -161,8 +162,10 @@ def run(cfg: Mapping[str, Any], choices: Mapping[str, str] | None = None,
     rdir = runs.run_dir(str(cfg.get("out_dir", "results")), experiment, key)
     rpath = os.path.join(rdir, "record.json")
     if runs.is_done(rpath) and not cfg.get("force", False):
-        log.info("skip %s: ok record exists (force=true re-runs)", rpath)
-        return runs.read_record(rpath)
+        log.debug("skip %s: ok record exists (force=true re-runs)", rpath)
+        record = runs.read_record(rpath)
+        track_record(cfg.get("tracking"), str(cfg.get("out_dir", "results")), record, rdir)  # no-op if logged
+        return record
 
     seed = int(cfg.get("seed", 0))
     threads = _set_threads(int(cfg.get("threads", 0)))
@@ -191,4 +194,5 @@ def run(cfg: Mapping[str, Any], choices: Mapping[str, str] | None = None,
         log.error("run %s failed: %s", key, out["error"])
     out["finished"] = _now()
     runs.write_json_atomic(rpath, out)
+    track_record(cfg.get("tracking"), str(cfg.get("out_dir", "results")), out, rdir)
     return out

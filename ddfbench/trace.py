@@ -101,13 +101,16 @@ class TraceOptions:
 
 @dataclass
 class TraceResult:
-    """t (N,) float32 (inf unless hit), hit (N,) bool, status (N,) int8 RayStatus; work counts."""
+    """t (N,) float32 (inf unless hit), hit (N,) bool, status (N,) int8 RayStatus; work counts;
+    host_syncs: device-to-host round trips of the loop (active-set compaction, the bracket and escape
+    checks; the Illinois refinement and the final copy not counted): on CUDA each waits for the device."""
 
     t: np.ndarray
     hit: np.ndarray
     status: np.ndarray
     field_evals: int
     trace_steps: int
+    host_syncs: int = 0
 
 
 def clip_to_box(origins: torch.Tensor, directions: torch.Tensor, half: float) -> tuple[torch.Tensor, torch.Tensor]:
@@ -129,11 +132,13 @@ def sphere_trace(field: TorchField, origins: np.ndarray, directions: np.ndarray,
     n = o.shape[0]
     t_out = torch.full((n,), float("inf"), device=dev)
     status = torch.full((n,), int(RayStatus.MISS), dtype=torch.int8, device=dev)
-    evals = 0
+    evals, syncs = 0, 1
     with torch.no_grad():
         t_enter, t_exit = clip_to_box(o, d, domain)
         t_far_all = t_exit.clamp_max(opt.t_max)
-        # per active ray: index, t, previous point (t_prev, r_prev), side sign, omega, escape phase
+        # per active ray: index, t, previous point (t_prev, r_prev), side sign, omega, escape phase.
+        # Rows are written back with where-scatters through idx (no sync) and compacted with one
+        # nonzero per step (the one round trip compaction needs: the new active count).
         idx = torch.nonzero(t_enter <= t_far_all).squeeze(1)
         t = t_enter[idx]
         t_far = t_far_all[idx]
@@ -156,6 +161,7 @@ def sphere_trace(field: TorchField, origins: np.ndarray, directions: np.ndarray,
                 escaping = f.abs() < opt.start_offset
                 side = torch.where(f < 0, -1.0, 1.0)
                 any_escaping = bool(escaping.any())
+                syncs += 1
             done = None  # rays that stop this step (None: none yet)
             free = None  # rays that take a sphere-tracing step (None: all)
             if any_escaping:  # escape phase: leave the surface the ray starts on
@@ -163,7 +169,7 @@ def sphere_trace(field: TorchField, origins: np.ndarray, directions: np.ndarray,
                 side = torch.where(escaped, torch.where(f < 0, -1.0, 1.0), side)
                 escaping = escaping & ~escaped
                 stuck = escaping & (step >= opt.escape_steps)
-                status[idx[stuck]] = int(RayStatus.UNDECIDED)
+                status[idx] = torch.where(stuck, int(RayStatus.UNDECIDED), status[idx])
                 done, free = stuck, ~escaping
             r = side * f
             if relax:
@@ -179,12 +185,13 @@ def sphere_trace(field: TorchField, origins: np.ndarray, directions: np.ndarray,
                 converged &= free
                 crossed &= free
 
-            status[idx[converged]] = int(RayStatus.HIT)
-            t_out[idx[converged]] = (t + r)[converged]
+            status[idx] = torch.where(converged | crossed, int(RayStatus.HIT), status[idx])
+            t_out[idx] = torch.where(converged, t + r, t_out[idx])
+            syncs += 1
             if bool(crossed.any()):
-                c = crossed
+                c = torch.nonzero(crossed).squeeze(1)
+                syncs += 1
                 bracket.append((idx[c], t_prev[c], r_prev[c], t[c], r[c], side[c]))
-                status[idx[c]] = int(RayStatus.HIT)
             done = converged | crossed if done is None else done | converged | crossed
 
             # next position; a relaxed step past the far bound falls back to the plain step
@@ -205,13 +212,15 @@ def sphere_trace(field: TorchField, origins: np.ndarray, directions: np.ndarray,
             else:
                 t_prev, r_prev = t, r
             t = new_t
-            keep = ~(done | (t > t_far))  # a ray past the far bound left the box: no evaluation there
+            keep = torch.nonzero(~(done | (t > t_far))).squeeze(1)  # past the far bound: left the box
+            syncs += 1
             idx, t, t_far, t_prev, r_prev, side = idx[keep], t[keep], t_far[keep], t_prev[keep], r_prev[keep], side[keep]
             if scaled:
                 omega = omega[keep]
             if any_escaping:
                 escaping = escaping[keep]
                 any_escaping = bool(escaping.any())
+                syncs += 1
         trace_steps = evals
         status[idx] = int(RayStatus.UNDECIDED)
 
@@ -222,7 +231,7 @@ def sphere_trace(field: TorchField, origins: np.ndarray, directions: np.ndarray,
     hit = status == int(RayStatus.HIT)
     t_out = torch.where(hit, t_out, torch.full_like(t_out, float("inf")))
     return TraceResult(t=t_out.cpu().numpy(), hit=hit.cpu().numpy(), status=status.cpu().numpy(),
-                       field_evals=int(evals), trace_steps=int(trace_steps))
+                       field_evals=int(evals), trace_steps=int(trace_steps), host_syncs=syncs)
 
 
 def _illinois(field: TorchField, o: torch.Tensor, d: torch.Tensor, a: torch.Tensor, fa: torch.Tensor,

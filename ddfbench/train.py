@@ -172,7 +172,13 @@ def train_loop(
     quiet = (not sys.stderr.isatty()) if quiet is None else quiet
     bar = tqdm(total=int(budget.max_steps), desc=desc, disable=quiet, leave=False, dynamic_ncols=True)
 
+    # On CUDA the loss values come back to the host once per `weight_check_every` steps (one stacked copy),
+    # and the clock is read, synchronized, at the same points: no per-step round trip. The budget and the
+    # NaN guard then act at that granularity. On the CPU (no queue to wait for) both happen every step.
+    host_every = int(weight_check_every) if budget.device.startswith("cuda") else 1
+    pending: list[torch.Tensor] = []
     train_s, probe_s, step, stop = 0.0, 0.0, 0, "max_steps"
+    window_t0 = None
     module.train()
     while step < budget.max_steps:
         progress = max(step / budget.max_steps, train_s / budget.max_seconds)
@@ -183,12 +189,12 @@ def train_loop(
         for g, lr in zip(optimizer.param_groups, base_lrs):
             g["lr"] = lr * factor
 
-        t0 = time.perf_counter()
+        window_t0 = time.perf_counter() if window_t0 is None else window_t0
         optimizer.zero_grad(set_to_none=True)
         loss = step_fn(step)
-        loss_value = float(loss.detach())  # synchronizes on CUDA
-        if not math.isfinite(loss_value):
-            stats.status, stats.message, stop = "failed", f"step {step}: loss is {loss_value} (non-finite)", "nonfinite"
+        pending.append(loss.detach())
+        if host_every == 1 and not math.isfinite(float(pending[-1])):
+            stats.status, stats.message, stop = "failed", f"step {step}: loss is {float(pending[-1])} (non-finite)", "nonfinite"
             break
         loss.backward()
         if grad_clip:
@@ -199,12 +205,23 @@ def train_loop(
             stats.status, stop = "failed", "nonfinite"
             stats.message = f"step {step}: weights '{bad}' became non-finite"
             break
+        if step % host_every and step < budget.max_steps:
+            continue
         _sync(budget.device)
-        train_s += time.perf_counter() - t0
-        curve.add(step, train_s, loss_value)
-        bar.update(1)
-        if step % 50 == 0:
-            bar.set_postfix(loss=f"{loss_value:.4g}", s=f"{train_s:.0f}")
+        train_s += time.perf_counter() - window_t0
+        window_t0 = None
+        values = torch.stack(pending).float().tolist()
+        pending.clear()
+        first_bad = next((k for k, v in enumerate(values) if not math.isfinite(v)), None)
+        if first_bad is not None:
+            bad_step = step - len(values) + first_bad
+            stats.status, stats.message, stop = "failed", f"step {bad_step}: loss is {values[first_bad]} (non-finite)", "nonfinite"
+            break
+        for k, value in enumerate(values):
+            curve.add(step - len(values) + k + 1, train_s, value)
+        bar.update(len(values))
+        if step % 50 < len(values):
+            bar.set_postfix(loss=f"{values[-1]:.4g}", s=f"{train_s:.0f}")
 
         progress = max(step / budget.max_steps, train_s / budget.max_seconds)
         while fractions and progress >= fractions[0] and progress < 1.0:

@@ -88,3 +88,16 @@ def test_any_hit_agrees_with_first_hit(sphere, rng):
     assert 0.1 < hit.mean() < 0.9  # both outcomes occur
     assert np.array_equal(hit, np.isfinite(orc.hit_distance(o, d)))
     assert np.array_equal(hit, orc.count_crossings(o, d) > 0)
+
+
+def test_warp_backend_without_warp_names_the_install(monkeypatch):
+    """Where the `gpu` extra is missing, choosing the warp backend is a one-line error with the install command."""
+    import sys
+
+    from ddfbench.errors import InputError
+
+    monkeypatch.setitem(sys.modules, "warp", None)  # import warp -> ImportError
+    monkeypatch.delitem(sys.modules, "ddfbench.warp_cast", raising=False)
+    with pytest.raises(InputError, match=r'pip install -e "\.\[gpu\]"') as err:
+        Oracle(load_shape({"name": "cube"}).mesh, "warp")
+    assert "\n" not in str(err.value)

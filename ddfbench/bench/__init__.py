@@ -9,9 +9,12 @@ same process (DESIGN.md, timing rules). One module per section:
 6. metrics      chamfer + f-score + sided distance vs the bare KD-tree work
 7. training     samples/s per learned family vs a bare training step of its network
 8. end_to_end   the default run and the smoke sweep, wall time per stage
+9. race         DDF (fp32, bf16, compiled) vs Warp BVH vs Embree on all cores vs sphere tracing, same rays,
+                each with its accuracy; ray-count sweep; the four DDF capacities (run by default on CUDA only)
 
 Each section module has `run(ctx: Context) -> SectionResult`; timing.py measures, results.py holds
 the rows, sizes.py the problem sizes, table.py writes the outputs.
 """
 
-SECTIONS = ("sampling", "oracle", "ddf", "tracing", "grid", "metrics", "training", "end_to_end")
+SECTIONS = ("sampling", "oracle", "ddf", "tracing", "grid", "metrics", "training", "end_to_end", "race")
+CUDA_ONLY_BY_DEFAULT = ("race",)  # left out of a --device cpu run unless --only names it

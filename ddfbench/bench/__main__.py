@@ -18,7 +18,7 @@ import time
 
 import torch
 
-from ddfbench.bench import SECTIONS
+from ddfbench.bench import CUDA_ONLY_BY_DEFAULT, SECTIONS
 from ddfbench.bench.context import Context
 from ddfbench.bench.results import SectionResult
 from ddfbench.bench.sizes import SIZES
@@ -48,6 +48,14 @@ def run_section(name: str, ctx: Context) -> SectionResult:
     return result
 
 
+def report_name(device: str, sizes: str) -> str:
+    """bench-cpu-<sizes>, or on CUDA bench-cuda-<gpu> (e.g. bench-cuda-nvidia-h100-80gb-hbm3; -<sizes> unless default)."""
+    if not device.startswith("cuda"):
+        return f"bench-cpu-{sizes}"
+    gpu = "".join(c if c.isalnum() else "-" for c in torch.cuda.get_device_name(torch.device(device)).lower())
+    return "-".join(["bench-cuda", "-".join(filter(None, gpu.split("-")))] + ([sizes] if sizes != "default" else []))
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m ddfbench.bench", description=__doc__.splitlines()[0])
     ap.add_argument("--device", default="cpu", help="cpu | cuda | auto (torch work; open3d and scipy stay on the CPU)")
@@ -57,12 +65,14 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--warmup", type=int, default=1, help="untimed calls after the cold one")
     ap.add_argument("--threads", type=int, default=0,
                     help="torch threads (0: torch's default); open3d and scipy use every core")
-    ap.add_argument("--only", default=",".join(SECTIONS), help="comma-separated sections to run")
+    ap.add_argument("--only", default=None, help="comma-separated sections to run (default: all; on a CPU device all "
+                    f"but {', '.join(CUDA_ONLY_BY_DEFAULT)})")
     ap.add_argument("--out", default=os.path.join("reports", "bench"), help="folder for the .md and .json")
     args = ap.parse_args(argv)
     try:
-        sections = parse_sections(args.only)
         device = resolve_device(args.device, "--device")
+        sections = parse_sections(args.only if args.only is not None else ",".join(
+            s for s in SECTIONS if device.startswith("cuda") or s not in CUDA_ONLY_BY_DEFAULT))
         if args.repeats < 1 or args.warmup < 0 or args.threads < 0:
             raise InputError(f"--repeats {args.repeats} / --warmup {args.warmup} / --threads {args.threads}: "
                              "need repeats >= 1, warmup >= 0, threads >= 0")
@@ -94,7 +104,7 @@ def main(argv: list[str] | None = None) -> int:
         "sections": {name: r.as_dict() for name, r in results.items()},
     }
     print(to_markdown(doc))
-    md, js = write(doc, args.out, f"bench-{device.split(':')[0]}-{args.sizes}")
+    md, js = write(doc, args.out, report_name(device, args.sizes))
     print(f"[bench] wrote {md} and {js}", file=sys.stderr)
     return 1 if any(r.error for r in results.values()) else 0
 

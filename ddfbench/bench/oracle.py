@@ -1,4 +1,5 @@
-"""Section 2, oracle: first-hit rays/s of each backend (open3d, embreex) on primary and incoherent rays.
+"""Section 2, oracle: first-hit rays/s of each backend (open3d, embreex, and Warp's BVH on the CPU where
+the `gpu` extra is installed) on primary and incoherent rays.
 
 Primary rays: one pinhole camera looking at the shape (ddfbench.bench.views.view_rays): coherent,
 neighbouring rays walk the same BVH nodes. Incoherent rays: origins uniform in the field box,
@@ -10,6 +11,8 @@ Sizes: shape, primary_px (image side), incoherent_rays.
 
 from __future__ import annotations
 
+import importlib.util
+
 import numpy as np
 import open3d as o3d
 
@@ -18,7 +21,7 @@ from ddfbench.bench.results import SectionResult, compare
 from ddfbench.bench.timing import measure_side_by_side
 from ddfbench.bench.views import view_rays
 
-BACKENDS = ("open3d", "embree")
+BACKENDS = ("open3d", "embree") + (("warp",) if importlib.util.find_spec("warp") else ())
 
 
 def incoherent_rays(n: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:

@@ -17,6 +17,11 @@ SIZES: dict[str, dict[str, dict]] = {
         "training": {"shape": "bunny", "steps": 20, "overrides": {}},
         "end_to_end": {"runs": [{"name": "default run", "args": []},
                                 {"name": "smoke sweep", "args": ["+experiment=smoke"]}]},
+        # GPU scale (run by default on CUDA only): 1M primary and 1M incoherent rays, 1k..16M sweep
+        "race": {"shape": "bunny", "px": 1024, "incoherent_rays": 1 << 20,
+                 "sweep": [1000, 4000, 16_000, 64_000, 256_000, 1 << 20, 1 << 22, 1 << 24], "embree_max": 1 << 24,
+                 "fit_seconds": 25.0, "n_samples": 200_000, "grid_resolution": 128, "chunk": 1 << 21,
+                 "compile": True, "capacities": True, "model": {}, "neural": {}},
     },
     "small": {
         "sampling": {"shape": "sphere", "face_mode": "total", "s_fc": 1, "s_dr": 2, "s_p": 2, "bare_rays": 20_000},
@@ -33,5 +38,8 @@ SIZES: dict[str, dict[str, dict]] = {
         "end_to_end": {"runs": [{"name": "tiny single run",
                                  "args": ["shape=cube", "model=mesh", "eval=smoke", "scene=none", "sampling=random",
                                           "sampling.n_samples=2000"]}]},
+        "race": {"shape": "sphere", "px": 12, "incoherent_rays": 300, "sweep": [100, 400], "embree_max": 100,
+                 "fit_seconds": 0.3, "n_samples": 3000, "grid_resolution": 16, "chunk": 128, "compile": False,
+                 "capacities": True, "model": {"batch": 256}, "neural": {"width": 16, "depth": 2, "batch": 256}},
     },
 }

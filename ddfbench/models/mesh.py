@@ -1,7 +1,7 @@
 """The triangle mesh (and its LODs by quadric decimation): the reference family.
 
 Rays are answered by Embree (open3d RaycastingScene, or embreex via the oracle's
-second backend); storage is the size of the saved binary `.ply`.
+second backend) or by NVIDIA Warp's BVH on the fit's device (`backend: warp`); storage is the size of the saved binary `.ply`.
 """
 
 from __future__ import annotations
@@ -35,7 +35,8 @@ T_MIN = 1e-5  # unit-cube units (float32 Embree: ~3e-8 at 0.5; renderer offsets 
 
 
 class MeshFamily(Representation):
-    """cfg: faces (0 = full resolution), backend ("open3d" | "embree")."""
+    """cfg: faces (0 = full resolution), backend ("open3d" | "embree" | "warp"; warp casts on the
+    fit budget's device)."""
 
     family = "mesh"
     sample_kind = None
@@ -45,18 +46,23 @@ class MeshFamily(Representation):
         self.mesh: trimesh.Trimesh | None = None
         self._oracle: Oracle | None = None
 
-    def _set_mesh(self, mesh: trimesh.Trimesh) -> None:
+    def _set_mesh(self, mesh: trimesh.Trimesh, device: str = "cpu") -> None:
         self.mesh = mesh
-        self._oracle = Oracle(mesh, backend=str(self.cfg.get("backend", "open3d")))
+        self._oracle = Oracle(mesh, backend=str(self.cfg.get("backend", "open3d")), device=device)
 
     def fit(self, data: FitData, budget: Budget, probe: Probe | None = None) -> FitStats:
         start = time.perf_counter()
-        self._set_mesh(decimate(data.mesh, int(self.cfg.get("faces", 0) or 0)))
+        self._set_mesh(decimate(data.mesh, int(self.cfg.get("faces", 0) or 0)), budget.device)
         seconds = time.perf_counter() - start
         stats = FitStats(steps=1, seconds=seconds, extra={"faces": int(len(self.mesh.faces))})
         if probe is not None:
             stats.probes.append({"step": 1, "seconds": seconds, **probe(self)})
         return stats
+
+    def to(self, device: str) -> "MeshFamily":
+        """Cast on `device` from now on (the warp backend; open3d and embree stay on the CPU)."""
+        self._set_mesh(self.mesh, device)
+        return self
 
     def intersect(self, origins: np.ndarray, directions: np.ndarray, normals: bool = True) -> Hits:
         """Embree first hit, never the surface a ray starts on: a hit closer than T_MIN is cast again

@@ -27,13 +27,27 @@ def has_family(name: str) -> bool:
     return name in available_families()
 
 
+def has_warp() -> bool:
+    """Whether NVIDIA Warp (the `gpu` extra) imports; CI installs it, so the warp cases run there."""
+    import importlib.util
+
+    return importlib.util.find_spec("warp") is not None
+
+
+def backend_params(*names: str) -> list:
+    """pytest params of ray-cast backend names; a name with "warp" in it is skipped where Warp is missing."""
+    skip = pytest.mark.skipif(not has_warp(), reason='NVIDIA Warp not installed (pip install -e ".[gpu]")')
+    return [pytest.param(n, marks=skip) if "warp" in n else n for n in names]
+
+
 @pytest.fixture(scope="session")
 def cube():
     return load_shape({"name": "cube"})
 
 
 def ray_backends(mesh):
-    """Every exact ray caster of a mesh: name -> fn(origins, directions) -> (t, hit, normal)."""
+    """Every exact ray caster of a mesh: name -> fn(origins, directions) -> (t, hit, normal); the warp
+    ones (Warp's BVH on the CPU) only where Warp is installed."""
     from ddfbench.models.mesh import MeshFamily
     from ddfbench.oracle import Oracle
     from ddfbench.representation import Budget, FitData
@@ -47,14 +61,21 @@ def ray_backends(mesh):
 
         return cast
 
-    rep = MeshFamily({"faces": 0, "backend": "open3d"})
-    rep.fit(FitData(samples=None, mesh=mesh, oracle=None), Budget())
+    def family_fn(backend):
+        rep = MeshFamily({"faces": 0, "backend": backend})
+        rep.fit(FitData(samples=None, mesh=mesh, oracle=None), Budget())
 
-    def family_cast(o, d):
-        h = rep.intersect(o, d)
-        return h.t, h.hit, h.normal
+        def cast(o, d):
+            h = rep.intersect(o, d)
+            return h.t, h.hit, h.normal
 
-    return {"oracle-open3d": oracle_fn("open3d"), "oracle-embree": oracle_fn("embree"), "mesh-family": family_cast}
+        return cast
+
+    casters = {"oracle-open3d": oracle_fn("open3d"), "oracle-embree": oracle_fn("embree"),
+               "mesh-family": family_fn("open3d")}
+    if has_warp():
+        casters.update({"oracle-warp": oracle_fn("warp"), "mesh-family-warp": family_fn("warp")})
+    return casters
 
 
 def assert_well_formed(t, hit, normal):

@@ -15,7 +15,7 @@ from ddfbench.errors import InputError
 from ddfbench.catalog import dirty_sphere
 from ddfbench.metrics import sample_surface
 from ddfbench.oracle import Oracle
-from tests.hard_cases.conftest import assert_well_formed, hard_shape, unit
+from tests.hard_cases.conftest import assert_well_formed, hard_shape, has_warp, unit
 
 DEFECTS = dict(zero_area=3, duplicate=4, flipped=5, unreferenced=6)
 
@@ -70,7 +70,7 @@ def test_no_nan_normals_anywhere():
     rng = np.random.default_rng(0)
     o = rng.uniform(-0.6, 0.6, (20000, 3))
     d = unit(rng.normal(size=(20000, 3)))
-    for backend in ("open3d", "embree"):
+    for backend in ("open3d", "embree") + (("warp",) if has_warp() else ()):
         t, tri, n = Oracle(shape.mesh, backend).first_hit(o, d)
         assert_well_formed(t, tri >= 0, n)
 

@@ -1,6 +1,6 @@
 """Case 2: grazing rays (tangent to a sphere, in a face's plane, at 1, 0.1, 0.01 degrees to a plane).
 
-Promise, for every exact ray caster (oracle open3d / embree, mesh family):
+Promise, for every exact ray caster (oracle open3d / embree / warp, mesh family on open3d / warp):
 - never a NaN: a hit has finite t >= 0 and a unit normal, a miss has t = inf and a zero normal;
 - a ray tangent to the icosphere's circumsphere misses (the facets lie inside it); 1e-3 inside it hits;
 - a ray lying exactly in a face's plane never reports the coplanar face: it hits the neighbouring
@@ -11,9 +11,9 @@ Promise, for every exact ray caster (oracle open3d / embree, mesh family):
 import numpy as np
 import pytest
 
-from tests.hard_cases.conftest import assert_well_formed, hard_shape, ray_backends, unit
+from tests.hard_cases.conftest import assert_well_formed, backend_params, hard_shape, ray_backends, unit
 
-BACKENDS = ["oracle-open3d", "oracle-embree", "mesh-family"]
+BACKENDS = backend_params("oracle-open3d", "oracle-embree", "oracle-warp", "mesh-family", "mesh-family-warp")
 
 
 @pytest.fixture(scope="module")

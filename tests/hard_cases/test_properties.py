@@ -1,7 +1,7 @@
 """Case 16: property-based tests (hypothesis) of the oracle and the metrics.
 
 Promise: chamfer (L2 and L1) is symmetric, non-negative and zero on identical clouds; f-score is
-in [0, 1] and 1 on identical clouds; first-hit t agrees across the open3d and embree backends
+in [0, 1] and 1 on identical clouds; first-hit t agrees across the open3d, embree and warp backends
 for random rays (within 1e-4, hit/miss disagreeing only on rays within 1e-5 of an edge); the
 inside test agrees with the analytic sphere and cube away from their surfaces.
 """
@@ -14,6 +14,7 @@ from hypothesis.extra.numpy import arrays
 from ddfbench import metrics
 from ddfbench.oracle import Oracle
 from ddfbench.shapes import load_shape
+from tests.hard_cases.conftest import has_warp
 
 coords = st.floats(-1.0, 1.0, allow_nan=False, width=32)
 clouds = arrays(np.float64, st.tuples(st.integers(1, 40), st.just(3)), elements=coords)
@@ -40,31 +41,34 @@ def test_fscore_in_unit_interval(a, b, r):
 
 @pytest.fixture(scope="module")
 def oracles():
+    """The bone mesh, its embree oracle and the other backends' oracles (warp where installed)."""
     mesh = load_shape({"name": "bone"}).mesh
-    return mesh, Oracle(mesh, "open3d"), Oracle(mesh, "embree")
+    others = [Oracle(mesh, b) for b in ("open3d",) + (("warp",) if has_warp() else ())]
+    return mesh, Oracle(mesh, "embree"), others
 
 
 @SETTINGS
 @given(st.integers(0, 2**31 - 1))
 def test_first_hit_agrees_across_backends(oracles, seed):
-    mesh, o3d, emb = oracles
+    mesh, emb, others = oracles
     rng = np.random.default_rng(seed)
     o = rng.uniform(-0.6, 0.6, (500, 3))
     d = rng.normal(size=(500, 3))
     d /= np.linalg.norm(d, axis=1, keepdims=True)
-    t1, tri1, _ = o3d.first_hit(o, d)
     t2, tri2, _ = emb.first_hit(o, d)
-    both = (tri1 >= 0) & (tri2 >= 0)
-    assert np.abs(t1[both] - t2[both]).max(initial=0) < 1e-4
-    differ = (tri1 >= 0) != (tri2 >= 0)
-    if differ.any():  # only rays that pass within 1e-5 of an edge may disagree
-        t = np.where(np.isfinite(t1), t1, t2)[differ]
-        p = o[differ] + t[:, None] * d[differ]
-        edges = np.asarray(mesh.vertices)[mesh.edges_unique]
-        a, e = edges[:, 0], edges[:, 1] - edges[:, 0]
-        s = np.clip(np.einsum("pej,ej->pe", p[:, None] - a[None], e) / (e * e).sum(1), 0, 1)
-        dist = np.linalg.norm(p[:, None] - (a[None] + s[..., None] * e[None]), axis=2).min(1)
-        assert dist.max() < 1e-5
+    for other in others:
+        t1, tri1, _ = other.first_hit(o, d)
+        both = (tri1 >= 0) & (tri2 >= 0)
+        assert np.abs(t1[both] - t2[both]).max(initial=0) < 1e-4, other.backend
+        differ = (tri1 >= 0) != (tri2 >= 0)
+        if differ.any():  # only rays that pass within 1e-5 of an edge may disagree
+            t = np.where(np.isfinite(t1), t1, t2)[differ]
+            p = o[differ] + t[:, None] * d[differ]
+            edges = np.asarray(mesh.vertices)[mesh.edges_unique]
+            a, e = edges[:, 0], edges[:, 1] - edges[:, 0]
+            s = np.clip(np.einsum("pej,ej->pe", p[:, None] - a[None], e) / (e * e).sum(1), 0, 1)
+            dist = np.linalg.norm(p[:, None] - (a[None] + s[..., None] * e[None]), axis=2).min(1)
+            assert dist.max() < 1e-5, other.backend
 
 
 @SETTINGS

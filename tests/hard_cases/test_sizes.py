@@ -14,11 +14,11 @@ from ddfbench.metrics import geometry_metrics
 from ddfbench.models.mesh import MeshFamily
 from ddfbench.oracle import Oracle
 from ddfbench.representation import Budget, FitData
-from tests.hard_cases.conftest import assert_well_formed, hard_shape, unit
+from tests.hard_cases.conftest import assert_well_formed, hard_shape, has_warp, unit
 
 
-def mesh_family_round_trip(mesh, o, d, tmp_path, save=True):
-    rep = MeshFamily({"faces": 0})
+def mesh_family_round_trip(mesh, o, d, tmp_path, save=True, backend="open3d"):
+    rep = MeshFamily({"faces": 0, "backend": backend})
     rep.fit(FitData(samples=None, mesh=mesh, oracle=None), Budget())
     hits = rep.intersect(o, d)
     assert_well_formed(hits.t, hits.hit, hits.normal)
@@ -61,8 +61,9 @@ def test_million_triangles(tmp_path):
     d = unit(rng.normal(size=(50000, 3)))
     hits = mesh_family_round_trip(shape.mesh, o, d, tmp_path, save=False)
     t_embree, tri, _ = Oracle(shape.mesh, "embree").first_hit(o, d)
-    both = hits.hit & (tri >= 0)
-    assert (hits.hit != (tri >= 0)).mean() < 1e-3 and np.abs(hits.t[both] - t_embree[both]).max() < 1e-4
+    for hits in [hits] + ([mesh_family_round_trip(shape.mesh, o, d, tmp_path, False, "warp")] if has_warp() else []):
+        both = hits.hit & (tri >= 0)
+        assert (hits.hit != (tri >= 0)).mean() < 1e-3 and np.abs(hits.t[both] - t_embree[both]).max() < 1e-4
     # analytic torus (major 0.35, minor 0.15 before normalization; normalized scale 1/1.0)
     p = rng.uniform(-0.6, 0.6, (20000, 3))
     s = shape.transform["scale"]

@@ -23,7 +23,7 @@ from ddfbench.render.counting import CountedTracer
 from ddfbench.representation import Budget, FitData, RayStatus
 from ddfbench.trace import TraceOptions, sphere_trace
 from ddfbench.sampling.oracle_sdf import oracle_sdf_samples
-from tests.hard_cases.conftest import assert_well_formed, compose, has_family, hard_shape, unit
+from tests.hard_cases.conftest import assert_well_formed, backend_params, compose, has_family, hard_shape, unit
 
 RAY_OFFSET = 1e-3  # conf/scene/*.yaml ray_offset: checked below against the scene configs
 FAMILIES = [f for f in ("mesh", "grid_sdf", "neural_sdf", "ddf") if has_family(f)]
@@ -107,10 +107,11 @@ def test_offset_rays_leaving_the_surface_do_not_self_hit(sphere_fits, family):
                                 f"at t < {RAY_OFFSET} (t = {np.sort(shadow.t[near])[:5]})")
 
 
-def test_mesh_rays_started_exactly_on_the_surface(sphere):
+@pytest.mark.parametrize("backend", backend_params("open3d", "warp"))
+def test_mesh_rays_started_exactly_on_the_surface(sphere, backend):
     """The mesh family's rays started exactly on a facet skip that facet: going outward they miss the
     sphere, going inward they stop at the far side within 1e-4 (not at t ~ 0 on the facet they start on)."""
-    rep = load_family("mesh")({"faces": 0})
+    rep = load_family("mesh")({"faces": 0, "backend": backend})
     rep.fit(FitData(None, sphere.mesh, None), Budget())
     mesh = sphere.mesh
     rng = np.random.default_rng(4)

@@ -1,6 +1,6 @@
 """Case 1: rays aimed exactly at the vertices and edge midpoints of a cube.
 
-Promise: every ray-cast backend (oracle open3d and embree, the mesh family on either)
+Promise: every ray-cast backend (oracle open3d, embree and warp, the mesh family on each)
 reports a hit at the exact entry distance, and `Oracle.count_crossings` counts each
 surface crossing once (2 for a ray that enters and leaves the cube), even where the
 ray passes through a vertex or an edge shared by several triangles.
@@ -12,7 +12,7 @@ import pytest
 from ddfbench.models.mesh import MeshFamily
 from ddfbench.oracle import Oracle
 from ddfbench.representation import Budget, FitData, RayStatus
-from tests.hard_cases.conftest import unit
+from tests.hard_cases.conftest import backend_params, unit
 
 
 def entering_rays(cube_mesh, rng, per_target=4):
@@ -46,7 +46,7 @@ def test_rays_really_enter_at_the_target(rays):
     assert np.allclose(t_in, 0.7) and np.all(t_out > t_in + 1e-3)
 
 
-@pytest.mark.parametrize("backend", ["open3d", "embree"])
+@pytest.mark.parametrize("backend", backend_params("open3d", "embree", "warp"))
 def test_oracle_hits_at_the_entry(cube, rays, backend):
     o, d, t_in, _ = rays
     t, tri, n = Oracle(cube.mesh, backend).first_hit(o, d)
@@ -56,7 +56,7 @@ def test_oracle_hits_at_the_entry(cube, rays, backend):
     assert np.all(np.einsum("ij,ij->i", n, d) < 0)
 
 
-@pytest.mark.parametrize("backend", ["open3d", "embree"])
+@pytest.mark.parametrize("backend", backend_params("open3d", "embree", "warp"))
 def test_mesh_family_hits_at_the_entry(cube, rays, backend):
     o, d, t_in, _ = rays
     rep = MeshFamily({"faces": 0, "backend": backend})

@@ -1,0 +1,64 @@
+"""Device-resident DDF depth: rays in, first-hit t out, torch tensors on the network's device throughout.
+
+`DDF.intersect` takes numpy rays and answers on the host (box entry, compaction of the rays meeting
+the box, one `.cpu()` per eval batch). This path is what a GPU renderer wants: the box entry, the
+network and the hit rule run on the device in fixed-size chunks with no compaction and no host round
+trip (a ray that misses the box is evaluated anyway and masked out), so a chunk is one static-shape
+graph that `torch.compile` (or CUDA graphs) can take whole. Precision: fp32, or bf16 / fp16 autocast
+(the answer is float32 either way). Depth only (no normals: those need a backward pass).
+"""
+
+from __future__ import annotations
+
+from typing import Callable
+
+import torch
+
+from ddfbench.geometry import ray_box
+from ddfbench.models.ddf import DDF
+
+PRECISIONS = {"fp32": None, "bf16": torch.bfloat16, "fp16": torch.float16}
+
+
+def box_entry_torch(o: torch.Tensor, d: torch.Tensor, half: float) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """ddfbench.models.ddf.box_entry on tensors (geometry.ray_box from t = 0 on): t_entry (N,) (0 inside),
+    t_exit (N,), meets (N,) bool."""
+    lo, hi = ray_box(o, d, half)
+    t_entry = lo.clamp_min(0.0)
+    return t_entry, hi, hi >= t_entry
+
+
+class DDFDepth:
+    """Callable (origins (N,3), unit directions (N,3)) float32 tensors on rep's device -> t (N,) float32, inf on a miss.
+
+    rep: a fitted DDF; precision: fp32 | bf16 | fp16 (autocast); compiled: torch.compile the per-chunk
+    function (mode "default"; dynamic shapes, so the last, shorter chunk does not recompile);
+    chunk: rays per network call (bounds the activations: ~chunk * width * 4 bytes per layer).
+    The hit rule is DDF.intersect's: visible, not nearer than min_hit_distance, not beyond the box exit.
+    """
+
+    def __init__(self, rep: DDF, precision: str = "fp32", compiled: bool = False, chunk: int = 1 << 20):
+        if precision not in PRECISIONS:
+            raise ValueError(f"DDF precision '{precision}': unknown ({' | '.join(PRECISIONS)})")
+        self.rep, self.precision, self.chunk = rep, precision, int(chunk)
+        self.device = next(rep.net.parameters()).device
+        rep.net.eval()
+        self._step: Callable[[torch.Tensor, torch.Tensor], torch.Tensor] = self._chunk_depth
+        if compiled:
+            self._step = torch.compile(self._chunk_depth, dynamic=True)
+
+    def _chunk_depth(self, o: torch.Tensor, d: torch.Tensor) -> torch.Tensor:
+        t_entry, t_exit, meets = box_entry_torch(o, d, self.rep.domain)
+        dtype = PRECISIONS[self.precision]
+        with torch.autocast(self.device.type, dtype=dtype or torch.float32, enabled=dtype is not None):
+            dist, logit = self.rep.net(o + t_entry[:, None] * d, d)
+        dist = dist.float().clamp_min(0.0)
+        visible = self.rep._hit_from(dist, None if logit is None else logit.float())
+        t = t_entry + dist
+        hit = visible & meets & (t > float(self.rep.cfg["min_hit_distance"])) & (t <= t_exit)
+        return torch.where(hit, t, torch.inf)
+
+    @torch.no_grad()
+    def __call__(self, origins: torch.Tensor, directions: torch.Tensor) -> torch.Tensor:
+        return torch.cat([self._step(origins[s : s + self.chunk], directions[s : s + self.chunk])
+                          for s in range(0, len(origins), self.chunk)] or [origins.new_zeros(0)])

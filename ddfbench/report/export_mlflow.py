@@ -1,0 +1,51 @@
+"""Backfill MLflow from existing run records (needs the `tracking` extra).
+
+    python -m ddfbench.report.export_mlflow results/ablation                 # into sqlite:///results/mlflow.db
+    python -m ddfbench.report.export_mlflow results/ablation --uri http://host:5000
+
+Every record.json below the folder becomes one MLflow run (ddfbench.tracking.log_record); records
+already logged (same key and status) are left alone, so running it twice adds nothing.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+
+from ddfbench.runs import find_records
+from ddfbench.tracking import default_uri, log_record
+
+
+def export(records_dir: str, uri: str) -> tuple[int, int]:
+    """Log every record below records_dir to uri; return (logged, already there)."""
+    logged = present = 0
+    for record in find_records(records_dir):
+        run_dir = record.pop("_dir")
+        if log_record(uri, record, run_dir) is None:
+            present += 1
+        else:
+            logged += 1
+    return logged, present
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m ddfbench.report.export_mlflow", description=__doc__.splitlines()[0])
+    ap.add_argument("records_dir", help="a folder of run records, e.g. results/<experiment>")
+    ap.add_argument("--uri", help="MLflow tracking URI (default: sqlite:///<parent of records_dir>/mlflow.db)")
+    args = ap.parse_args(argv)
+    if not os.path.isdir(args.records_dir):
+        print(f"export_mlflow: {args.records_dir}: not a folder", file=sys.stderr)
+        return 2
+    uri = args.uri or default_uri(os.path.dirname(os.path.abspath(args.records_dir)))
+    try:
+        logged, present = export(args.records_dir, uri)
+    except ImportError:
+        print('export_mlflow: mlflow is not installed (pip install -e ".[tracking]")', file=sys.stderr)
+        return 2
+    print(f"{uri}: {logged} runs logged, {present} already there")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

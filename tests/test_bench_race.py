@@ -1,0 +1,46 @@
+"""The `race` section of `python -m ddfbench.bench` (DDF vs Warp BVH vs Embree vs sphere tracing) at tiny
+sizes on the CPU: every contestant answers the same rays, Warp's depth equals the oracle's, the sweep and
+the four capacities are all there. No timing assertions."""
+
+import json
+import math
+
+import pytest
+
+from ddfbench.bench.__main__ import main
+
+pytest.importorskip("warp", reason='NVIDIA Warp not installed (pip install -e ".[gpu]")')
+
+
+@pytest.fixture(scope="module")
+def race(tmp_path_factory):
+    out = tmp_path_factory.mktemp("bench")
+    code = main(["--sizes", "small", "--only", "race", "--repeats", "1", "--warmup", "0", "--threads", "1",
+                 "--out", str(out)])
+    return code, json.loads((out / "bench-cpu-small.json").read_text())["sections"]["race"]
+
+
+def test_race_runs_every_contestant_on_both_ray_sets(race):
+    code, sec = race
+    assert code == 0 and sec["error"] is None
+    for set_name in ("primary", "incoherent"):
+        d = sec["details"][set_name]
+        for name in ("ddf_fp32", "ddf_bf16", "warp_bvh", "embree_all_cores", "neural_sdf_trace", "grid_sdf_trace"):
+            assert d[name]["rays_per_s"] > 0 and 0.0 <= d[name]["mask_iou"] <= 1.0, (set_name, name)
+        # the BVH answers the oracle's rays exactly (float32 casts of one mesh)
+        assert d["warp_bvh"]["mask_iou"] == 1.0 and d["warp_bvh"]["depth_mae"] < 1e-5
+        assert d["embree_all_cores"]["mask_iou"] == 1.0 and d["embree_all_cores"]["depth_mae"] == 0.0
+        diff = d["ddf_bf16_vs_fp32_depth_diff"]
+        assert math.isfinite(diff["depth_mae"]) and 0.0 <= diff["mask_disagreement"] <= 1.0
+    assert all(math.isfinite(r["ratio"]) and r["ratio"] > 0 for r in sec["rows"])
+
+
+def test_race_sweep_and_capacities(race):
+    _, sec = race
+    sweep = sec["details"]["sweep"]
+    assert [r["rays"] for r in sweep] == [100, 400]
+    assert "embree_all_cores" in sweep[0] and "embree_all_cores" not in sweep[1]  # embree_max = 100
+    caps = sec["details"]["capacities"]
+    assert list(caps) == ["c1", "c2", "c3", "c4"]
+    assert [caps[c]["width"] for c in caps] == [64, 128, 256, 512]
+
