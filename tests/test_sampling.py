@@ -246,6 +246,7 @@ def _build_in_process(cache_dir):
     return build(shape, Oracle(shape.mesh), config("random", n_samples=20000), "rays", 0, cache_dir)[1]
 
 
+@pytest.mark.slow
 def test_two_processes_building_one_dataset_leave_one_complete_file(tmp_path):
     """Two runs that need the same dataset at once (a sweep under a parallel launcher) both build it;
     the cache ends with one complete file and no temporaries."""

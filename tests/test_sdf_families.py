@@ -209,6 +209,7 @@ def test_neural_sdf_geometric_init_is_a_sphere():
     assert np.abs(plain.sdf(p) - ref).mean() > 0.1
 
 
+@pytest.mark.slow
 def test_neural_sdf_fits_the_sphere(sphere, tmp_path):
     mesh, oracle, samples = sphere
     rep = load_family("neural_sdf")({**SMALL_NET, "w_eikonal": 0.05}, DOMAIN)
@@ -275,6 +276,7 @@ def test_gan_sdf_architecture_matches_the_thesis():
         load_family("gan_sdf")({"near_term": "cubic"})
 
 
+@pytest.mark.slow
 def test_gan_sdf_seed_sweep_reports_its_failure_rate(sphere, tmp_path):
     """Several seeds of the thesis loss plus the L1 anchor on the sphere; failures are counted, not hidden.
 
