@@ -19,7 +19,7 @@ from hydra.experimental.callback import Callback
 from hydra.types import RunMode
 from omegaconf import DictConfig, OmegaConf
 
-from ddfbench import CONF_DIR
+from ddfbench import CONF_DIR, plugins  # plugins registers the `members` resolver the experiments use
 
 KEY_FILE = "ddfbench_key.txt"  # written in each Hydra job folder: which record the job produced
 
@@ -86,8 +86,49 @@ def wants_default_experiment(args: list[str]) -> bool:
     return not any(a.startswith(named) for a in args)
 
 
+def _known_keys(group: str, args: list[str]) -> tuple[dict[str, Any], dict[str, Any]]:
+    """(keys a `<group>.<key>=` override may set, keys the named config's own YAML holds): those of the
+    one config the command names (`model=ddf_paper`: its own and its family's), else of every config."""
+    chosen = [a.split("=", 1)[1] for a in args if a.lstrip("+").startswith(f"{group}=")]
+    names = chosen if len(chosen) == 1 and "," not in chosen[0] else plugins.names(group)
+    known: dict[str, Any] = {}
+    for name in names:
+        own = plugins.defaults(group, name)
+        known.update(own)
+        if group == "model":
+            known.update(plugins.defaults(group, str(own.get(plugins.NAME_KEYS[group], name))))
+    return known, (own if len(names) == 1 else known)
+
+
+def checked_overrides(args: list[str]) -> list[str]:
+    """args with each `model.<key>=` / `sampling.<key>=` checked against the plugin's known keys.
+
+    An unknown key is a one-line InputError naming it and the known keys. A key the family has but the
+    chosen preset's YAML leaves to the family's defaults (model=ddf_paper model.entry_share=0.3) is
+    passed as `++model.<key>=`, so Hydra adds it instead of refusing it.
+    """
+    out = []
+    for arg in args:
+        path, _, value = arg.lstrip("+").partition("=")
+        group, _, key = path.partition(".")
+        if not _ or group not in plugins.NAME_KEYS or not key:
+            out.append(arg)
+            continue
+        known, own = _known_keys(group, args)
+        plugins.strict_keys(group, {key.split(".")[0]: value}, known)
+        out.append(f"++{path}={value}" if key.split(".")[0] not in own and not arg.startswith("+") else arg)
+    return out
+
+
 def main() -> None:
     """Entry point. Without `model=` or `+experiment=`, run `+experiment=default` with the given overrides."""
+    from ddfbench.errors import InputError
+
+    try:
+        sys.argv[1:] = checked_overrides(sys.argv[1:])
+    except InputError as err:
+        print(f"ddfbench: {err}", file=sys.stderr)
+        sys.exit(1)
     if wants_default_experiment(sys.argv[1:]):
         sys.argv.append("+experiment=default")
     task()

@@ -14,17 +14,16 @@ from typing import Callable
 
 import torch
 
+from ddfbench.geometry import ray_box
 from ddfbench.models.ddf import DDF
 
 PRECISIONS = {"fp32": None, "bf16": torch.bfloat16, "fp16": torch.float16}
 
 
 def box_entry_torch(o: torch.Tensor, d: torch.Tensor, half: float) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-    """ddfbench.models.ddf.box_entry on tensors: t_entry (N,) (0 inside), t_exit (N,), meets (N,) bool."""
-    inv = 1.0 / d
-    t0, t1 = (-half - o) * inv, (half - o) * inv
-    lo = torch.where(torch.isnan(t0), -torch.inf, torch.minimum(t0, t1)).amax(1)  # nan: parallel ray on a slab face
-    hi = torch.where(torch.isnan(t1), torch.inf, torch.maximum(t0, t1)).amin(1)
+    """ddfbench.models.ddf.box_entry on tensors (geometry.ray_box from t = 0 on): t_entry (N,) (0 inside),
+    t_exit (N,), meets (N,) bool."""
+    lo, hi = ray_box(o, d, half)
     t_entry = lo.clamp_min(0.0)
     return t_entry, hi, hi >= t_entry
 

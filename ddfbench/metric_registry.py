@@ -14,9 +14,11 @@ from typing import Any, Mapping
 
 import numpy as np
 
-# Domain-box diagonal for the default padded box (half-side 0.6): the largest distance two points
+from ddfbench.geometry import BOX_HALF
+
+# Domain-box diagonal for the default padded box (half-side BOX_HALF): the largest distance two points
 # of the field domain can have. Empty reconstructions get the worst value this allows.
-PENALTY_DISTANCE = float(2 * 0.6 * np.sqrt(3.0))
+PENALTY_DISTANCE = float(2 * BOX_HALF * np.sqrt(3.0))
 FLOOR_KEY = "noise_floor"  # record.metrics[FLOOR_KEY] mirrors record.metrics for GT vs a GT resample
 
 

@@ -46,33 +46,43 @@ def sided_distance(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return nearest_distance(a, b)[0] ** 2
 
 
+def chamfer_l2_of(d_ab: np.ndarray, d_ba: np.ndarray, w1: float = 1.0, w2: float = 1.0) -> float:
+    """Chamfer L2 (paper Eq. 14) from unsquared nearest distances a→b (N,) and b→a (M,):
+    w1·mean d_ab² + w2·mean d_ba²."""
+    return float(w1 * (d_ab**2).mean() + w2 * (d_ba**2).mean())
+
+
+def chamfer_l1_of(d_ab: np.ndarray, d_ba: np.ndarray) -> float:
+    """Chamfer L1 (Occupancy Networks) from nearest distances a→b (N,) and b→a (M,): ½(mean d_ab + mean d_ba)."""
+    return float(0.5 * (d_ab.mean() + d_ba.mean()))
+
+
+def f_score_of(d_pred_gt: np.ndarray, d_gt_pred: np.ndarray, radius: float) -> float:
+    """F = 2PR/(P+R) from nearest distances pred→GT (precision P: share within radius) and GT→pred
+    (recall R); 0 where P+R = 0."""
+    p, r = float((d_pred_gt <= radius).mean()), float((d_gt_pred <= radius).mean())
+    return 0.0 if p + r == 0 else 2 * p * r / (p + r)
+
+
 def chamfer_distance(a: np.ndarray, b: np.ndarray, w1: float = 1.0, w2: float = 1.0) -> float:
-    """Chamfer L2 (paper Eq. 14): w1·mean sided(a, b) + w2·mean sided(b, a); (w1+w2)·D² if a cloud is empty."""
+    """Chamfer L2 between clouds a (N,3) and b (M,3); (w1+w2)·D² if a cloud is empty."""
     if _empty(a, b):
         return float((w1 + w2) * PENALTY_DISTANCE**2)
-    return float(w1 * sided_distance(a, b).mean() + w2 * sided_distance(b, a).mean())
+    return chamfer_l2_of(nearest_distance(a, b)[0], nearest_distance(b, a)[0], w1, w2)
 
 
 def chamfer_l1(a: np.ndarray, b: np.ndarray) -> float:
-    """½(mean distance a→b + mean distance b→a), unsquared (Occupancy Networks); D if a cloud is empty."""
+    """Chamfer L1 between clouds a (N,3) and b (M,3), unsquared; D if a cloud is empty."""
     if _empty(a, b):
         return PENALTY_DISTANCE
-    return float(0.5 * (nearest_distance(a, b)[0].mean() + nearest_distance(b, a)[0].mean()))
-
-
-def precision_recall(gt: np.ndarray, pred: np.ndarray, radius: float) -> tuple[float, float]:
-    """precision = share of pred within radius of gt; recall = share of gt within radius of pred (0 if empty)."""
-    if _empty(gt, pred):
-        return 0.0, 0.0
-    d_pred, _ = nearest_distance(pred, gt)
-    d_gt, _ = nearest_distance(gt, pred)
-    return float((d_pred <= radius).mean()), float((d_gt <= radius).mean())
+    return chamfer_l1_of(nearest_distance(a, b)[0], nearest_distance(b, a)[0])
 
 
 def f_score(gt: np.ndarray, pred: np.ndarray, radius: float) -> float:
-    """F = 2PR/(P+R) at an unsquared radius; 0 where P+R = 0."""
-    p, r = precision_recall(gt, pred, radius)
-    return 0.0 if p + r == 0 else 2 * p * r / (p + r)
+    """F-score of clouds pred (M,3) against gt (N,3) at an unsquared radius; 0 if a cloud is empty."""
+    if _empty(gt, pred):
+        return 0.0
+    return f_score_of(nearest_distance(pred, gt)[0], nearest_distance(gt, pred)[0], radius)
 
 
 def summary(values: np.ndarray) -> dict[str, float]:
@@ -129,15 +139,12 @@ def cloud_metrics(gt: np.ndarray, rec: np.ndarray, radii: Sequence[float]) -> di
 def distance_metrics(d_gr: np.ndarray, d_rg: np.ndarray, radii: Sequence[float]) -> dict[str, Any]:
     """cloud_metrics from nearest distances already found: GT points to rec d_gr (N,), rec points to GT d_rg (M,)."""
     out: dict[str, Any] = {
-        "chamfer_l2": float((d_gr**2).mean() + (d_rg**2).mean()),
-        "chamfer_l1": float(0.5 * (d_gr.mean() + d_rg.mean())),
-        "fscore": {},
+        "chamfer_l2": chamfer_l2_of(d_gr, d_rg),
+        "chamfer_l1": chamfer_l1_of(d_gr, d_rg),
+        "fscore": {str(r): f_score_of(d_rg, d_gr, r) for r in radii},
         "sided_gt_to_rec": summary(d_gr**2),
         "sided_rec_to_gt": summary(d_rg**2),
     }
-    for r in radii:
-        p, rc = float((d_rg <= r).mean()), float((d_gr <= r).mean())
-        out["fscore"][str(r)] = 0.0 if p + rc == 0 else 2 * p * rc / (p + rc)
     return out
 
 
@@ -179,8 +186,8 @@ def geometry_metrics(
         if with_point_to_surface:
             to_rec = point_to_surface(gt_pts, rec)
             to_gt = point_to_surface(rec_pts, gt)
-            out["p2s_chamfer_l2"] = float((to_rec**2).mean() + (to_gt**2).mean())
-            out["p2s_chamfer_l1"] = float(0.5 * (to_rec.mean() + to_gt.mean()))
+            out["p2s_chamfer_l2"] = chamfer_l2_of(to_rec, to_gt)
+            out["p2s_chamfer_l1"] = chamfer_l1_of(to_rec, to_gt)
     if noise_floor:
         resample, _ = sample_surface(gt, n_points, seed + 2)
         floor = distance_metrics(nearest_distance(gt_pts, resample)[0], nearest_in(gt_tree, resample)[0], radii)

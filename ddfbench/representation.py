@@ -8,12 +8,18 @@ from __future__ import annotations
 
 import abc
 import enum
+import json
 import os
+import pickle
 from dataclasses import dataclass, field
 from typing import Any, Callable, ClassVar, Mapping
 
 import numpy as np
 import trimesh
+
+from ddfbench import plugins
+from ddfbench.errors import InputError
+from ddfbench.geometry import BOX_HALF
 
 
 class RayStatus(enum.IntEnum):
@@ -90,22 +96,30 @@ Probe = Callable[["Representation"], dict[str, float]]
 class Representation(abc.ABC):
     """A shape family. Subclass in `ddfbench/models/<family>.py` and expose it as `FAMILY`.
 
-    cfg is the `model` config node as a plain dict; domain is the half-side of the field box.
-    `sample_kind` says what training samples fit wants: "rays" (x, d, t, hit), "sdf" (x, sdf) or None.
+    cfg is the `model` config node as a plain dict, checked and completed by `configure` (the family's
+    conf/model/<family>.yaml is the one source of its defaults); domain is the half-side of the field box.
+    `sample_kind` says what training samples fit wants: "rays" (x, d, t, hit), "sdf" (x, sdf) or None
+    (the runner then builds none). `learned` says fit trains something (fit curves, training benches).
     `needs_closed_surface` says its labels rely on a sensible inside/outside (flagged on open meshes).
     """
 
     family: ClassVar[str] = "abstract"
     sample_kind: ClassVar[str | None] = None
+    learned: ClassVar[bool] = False
     # True where training signs come from the inside test: an open input is then flagged in the record.
     needs_closed_surface: ClassVar[bool] = False
 
-    def __init__(self, cfg: Mapping[str, Any], domain: float = 0.6):
-        self.cfg = dict(cfg)
+    def __init__(self, cfg: Mapping[str, Any], domain: float = BOX_HALF):
+        self.cfg = self.configure(cfg)
         self.domain = float(domain)
         self._saved_path: str | None = None
         # what the last to_mesh reported (ddfbench.extract info: field_evals, capped, empty, ...); {} if nothing
         self.extract_info: dict[str, Any] = {}
+
+    @classmethod
+    def configure(cls, cfg: Mapping[str, Any]) -> dict[str, Any]:
+        """The family's YAML defaults overlaid by cfg; an unknown key or a mistyped value is a one-line InputError."""
+        return plugins.family_config(cls.family, cfg)
 
     @abc.abstractmethod
     def fit(self, data: "FitData", budget: Budget, probe: Probe | None = None) -> FitStats:
@@ -126,7 +140,7 @@ class Representation(abc.ABC):
 
     @classmethod
     @abc.abstractmethod
-    def load(cls, path: str, domain: float = 0.6) -> "Representation":
+    def load(cls, path: str, domain: float = BOX_HALF) -> "Representation":
         """Read an artifact written by save (models: torch.load(weights_only=True))."""
 
     def _publish(self, tmp: str, path: str) -> str:
@@ -134,6 +148,33 @@ class Representation(abc.ABC):
         os.replace(tmp, path)
         self._saved_path = path
         return path
+
+    def _save_network(self, path: str, state: Mapping[str, Any]) -> str:
+        """Save a network family: `<path>.pt` (".pt" added when missing) holding the state dict (name ->
+        tensor) and a JSON header {family, domain, cfg}, written to a temporary file and published."""
+        import torch
+
+        if not path.endswith(".pt"):
+            path = f"{path}.pt"
+        header = {"family": self.family, "domain": self.domain, "cfg": self.cfg}
+        tmp = f"{path}.tmp{os.getpid()}"
+        torch.save({"header": json.dumps(header), "state_dict": dict(state)}, tmp)
+        return self._publish(tmp, path)
+
+    @classmethod
+    def _read_network(cls, path: str) -> tuple[dict[str, Any], dict[str, Any]]:
+        """(header, state dict) of a file written by _save_network (torch.load with weights_only); a
+        one-line InputError when it cannot be read or holds another family."""
+        import torch
+
+        try:
+            blob = torch.load(path, map_location="cpu", weights_only=True)
+            header, state = json.loads(blob["header"]), blob["state_dict"]
+        except (OSError, RuntimeError, KeyError, ValueError, TypeError, pickle.UnpicklingError) as exc:
+            raise InputError(f"{cls.family} artifact {path}: unreadable ({(str(exc) or type(exc).__name__).splitlines()[0]})") from None
+        if header.get("family") != cls.family:
+            raise InputError(f"{cls.family} artifact {path}: holds family {header.get('family')!r}, not {cls.family}")
+        return header, state
 
     def to(self, device: str) -> "Representation":
         """Move what this representation computes with (its torch modules and tensors) to `device`

@@ -17,9 +17,10 @@ from typing import Any, Mapping
 import numpy as np
 import torch
 
-from ddfbench import runs
+from ddfbench import plugins, runs
 from ddfbench.budget import fit_limit, fit_record
 from ddfbench.errors import InputError
+from ddfbench.geometry import BOX_HALF
 from ddfbench.metrics import cloud_metrics, geometry_metrics, penalty_metrics, sample_surface
 from ddfbench.models import load_family
 from ddfbench.oracle import Oracle
@@ -74,23 +75,27 @@ def _stages(cfg: Mapping[str, Any], rdir: str, device: str, seed: int, out: dict
     shape.mesh.export(os.path.join(rdir, "gt_mesh.ply"), file_type="ply", encoding="binary")
     artifacts["gt_mesh"] = "gt_mesh.ply"
 
-    cache_dir = os.path.join(cfg.get("out_dir", "results"), ".cache", "datasets")
-    kind = Family.sample_kind or "rays"
-    samples, dataset_path, info = sampling.build(shape, oracle, dict(cfg["sampling"]), kind, seed, cache_dir)
-    ev, tr = cfg["eval"], cfg["train"]
-    if tr.get("n_labels"):  # matched label counts: a seeded subset of what the strategy produced
-        want = int(tr["n_labels"])
-        if want > len(samples):
-            raise InputError(f"train.n_labels={want}: sampling={cfg['sampling']['strategy']} gave only "
-                             f"{len(samples)} labels on {shape.name} (raise its sample size or lower n_labels)")
-        info = dict(info, n_generated=len(samples), n_samples=want)
-        samples = samples.subset(want, np.random.default_rng(seed + 11))
-    out["sampling"] = {**dict(cfg["sampling"]), **info}
-    cost["sampling_s"] = float(info.get("sampling_s", 0.0))
-    artifacts["dataset"] = os.path.relpath(dataset_path, rdir)
+    samples, info = None, {}
+    if Family.sample_kind is None:  # the family builds from the mesh: no samples, no sampling time or count
+        out["sampling"] = {"strategy": None, "kind": None}  # (the sampler's unused config stays in record.config)
+    else:
+        cache_dir = os.path.join(cfg.get("out_dir", "results"), ".cache", "datasets")
+        samples, dataset_path, info = sampling.build(shape, oracle, dict(cfg["sampling"]), Family.sample_kind, seed,
+                                                     cache_dir)
+        if cfg["train"].get("n_labels"):  # matched label counts: a seeded subset of what the strategy produced
+            want = int(cfg["train"]["n_labels"])
+            if want > len(samples):
+                raise InputError(f"train.n_labels={want}: sampling={cfg['sampling']['strategy']} gave only "
+                                 f"{len(samples)} labels on {shape.name} (raise its sample size or lower n_labels)")
+            info = dict(info, n_generated=len(samples), n_samples=want)
+            samples = samples.subset(want, np.random.default_rng(seed + 11))
+        out["sampling"] = {**dict(cfg["sampling"]), **info}
+        cost["sampling_s"] = float(info.get("sampling_s", 0.0))
+        artifacts["dataset"] = os.path.relpath(dataset_path, rdir)
 
+    ev, tr = cfg["eval"], cfg["train"]
     radii = [float(r) for r in ev["radii"]]
-    domain = float(cfg.get("domain", 0.6))
+    domain = float(cfg.get("domain", BOX_HALF))
     rep = Family(dict(cfg["model"]), domain=domain)
     n_labels = info.get("n_samples")
     limit = fit_limit(tr, cfg["model"], n_labels)
@@ -155,10 +160,14 @@ def run(cfg: Mapping[str, Any], choices: Mapping[str, str] | None = None,
         overrides: list[str] | None = None, device: str | None = None) -> dict[str, Any]:
     """Run one job from a resolved config (plain dict); return its record (also written to disk).
 
+    The levels the config asks for (capacity, sample_size) are applied first (plugins.job_config), so
+    the record key and the record's config are those of the job as it runs.
+
     choices: Hydra's config-group choices (the record's `model` label); device: the job's device as
     the launcher gives it (ddfbench.launch.job_device); None means train.device.
     """
     choices = dict(choices or {})
+    cfg = plugins.job_config(cfg)
     experiment = str(cfg.get("experiment_name", "single"))
     key = runs.config_key(cfg)
     rdir = runs.run_dir(str(cfg.get("out_dir", "results")), experiment, key)

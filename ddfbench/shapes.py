@@ -1,4 +1,4 @@
-"""Load, validate and normalize shapes; the built-in catalog.
+"""Load, validate and normalize shapes; serve the built-in catalog (ddfbench.catalog) by name.
 
 Every shape is normalized before anything else: bounding-box center to the
 origin, longest side to 1 (the unit cube [-0.5, 0.5]^3). Normalization runs in
@@ -14,6 +14,7 @@ from typing import Any, Callable, Mapping
 import numpy as np
 import trimesh
 
+from ddfbench.catalog import ALIASES, BUILDERS, PYMESHLAB_SAMPLES, pymeshlab_samples_dir
 from ddfbench.errors import InputError
 
 _MESH_EXTENSIONS = {"obj", "ply", "stl", "off", "glb", "gltf", "dae", "3mf"}
@@ -48,46 +49,9 @@ class Shape:
         }
 
 
-def pymeshlab_samples_dir() -> str:
-    """Folder of the sample meshes shipped inside the installed pymeshlab package."""
-    import pymeshlab
-
-    return os.path.join(os.path.dirname(pymeshlab.__file__), "tests", "sample_meshes")
-
-
-# name -> file below the pymeshlab sample folder
-PYMESHLAB_SAMPLES = {
-    "bunny": "bunny.obj",
-    "bunny10k": "bunny10k_textured.obj",  # non-watertight
-    "airplane": "airplane.obj",
-    "cow": "cow.obj",
-    "bone": "bone.ply",
-    "cube": "cube.obj",
-    "range_scan": "rangemaps/face000.ply",  # an open range scan
-}
-
-
-def _open_box() -> trimesh.Trimesh:
-    box = trimesh.creation.box(extents=(1.0, 1.0, 1.0))
-    top = box.face_normals[:, 2] > 0.5
-    return trimesh.Trimesh(box.vertices, box.faces[~top], process=False)
-
-
-PROCEDURAL: dict[str, Callable[..., trimesh.Trimesh]] = {
-    "sphere": lambda radius=0.5, subdivisions=4: trimesh.creation.icosphere(subdivisions, radius),
-    "torus": lambda major_radius=0.35, minor_radius=0.15: trimesh.creation.torus(major_radius, minor_radius),
-    "box": lambda extents=(1.0, 0.6, 0.4): trimesh.creation.box(extents=extents),
-    "capsule": lambda height=0.5, radius=0.25: trimesh.creation.capsule(height=height, radius=radius),
-    "thin_plate": lambda thickness=0.02: trimesh.creation.box(extents=(1.0, 1.0, thickness)),
-    "open_box": _open_box,
-}
-
-
 def catalog() -> list[str]:
     """Every built-in shape name (the hard cases under hard/...)."""
-    from ddfbench.hard_shapes import HARD
-
-    return sorted(PYMESHLAB_SAMPLES) + sorted(PROCEDURAL) + sorted(HARD)
+    return sorted(PYMESHLAB_SAMPLES) + sorted(SHAPE_BUILDERS) + sorted(ALIASES)
 
 
 def read_mesh_file(path: str) -> trimesh.Trimesh:
@@ -192,22 +156,31 @@ def load_shape(cfg: Mapping[str, Any]) -> Shape:
     elif name in PYMESHLAB_SAMPLES:
         source = os.path.join(pymeshlab_samples_dir(), PYMESHLAB_SAMPLES[name])
         raw, label = read_mesh_file(source), f"shape {name} ({source})"
-    elif name in PROCEDURAL or name.startswith("hard/"):
-        builders = PROCEDURAL
-        if name.startswith("hard/"):
-            from ddfbench.hard_shapes import HARD  # the hard-case catalog builds on this module
-
-            if name not in HARD:
-                raise InputError(f"shape '{name}': unknown hard case (one of {', '.join(sorted(HARD))})")
-            builders = HARD
+    elif ALIASES.get(name, name) in SHAPE_BUILDERS:
         try:
-            raw = builders[name](**params)
+            raw = SHAPE_BUILDERS[ALIASES.get(name, name)](**params)
         except TypeError as exc:
             raise InputError(f"shape {name}: bad params {params} ({exc})") from None
         label, source = f"shape {name}", "procedural"
+    elif name.startswith("hard/"):
+        raise InputError(f"shape '{name}': unknown hard case (one of {', '.join(HARD_CASES)})")
     else:
         raise InputError(f"shape '{name}': unknown; use shape=file shape.path=... or one of {', '.join(catalog())}")
     mesh, warnings = validate(raw, label)
     mesh, transform = normalize(mesh)
     return Shape(mesh=mesh, name=name, source=source, transform=transform,
                  watertight=bool(mesh.is_watertight), warnings=warnings)
+
+
+def moved(base: str = "cow", offset: float = 1e7, scale: float = 1.0) -> trimesh.Trimesh:
+    """Catalog shape `base` (normalized) scaled by `scale`, then translated by offset * (1, -0.7, 0.3), in float64."""
+    if not (np.isfinite(offset) and np.isfinite(scale) and scale > 0):
+        raise InputError(f"hard/moved: offset {offset!r} must be finite and scale {scale!r} finite and > 0")
+    mesh = load_shape({"name": base}).mesh
+    v = np.asarray(mesh.vertices, np.float64) * float(scale) + float(offset) * np.array([1.0, -0.7, 0.3])
+    return trimesh.Trimesh(v, np.asarray(mesh.faces), process=False)
+
+
+# every built-in builder by name: the raw catalog's and the one that builds on a loaded shape
+SHAPE_BUILDERS: dict[str, Callable[..., trimesh.Trimesh]] = {**BUILDERS, "hard/moved": moved}
+HARD_CASES = sorted(n for n in SHAPE_BUILDERS if n.startswith("hard/"))  # the hard-case suite's shapes

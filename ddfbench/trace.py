@@ -48,6 +48,7 @@ import numpy as np
 import torch
 
 from ddfbench.errors import InputError
+from ddfbench.geometry import ray_box
 from ddfbench.representation import Hits, RayStatus
 
 TorchField = Callable[[torch.Tensor], torch.Tensor]
@@ -113,14 +114,11 @@ class TraceResult:
 
 
 def clip_to_box(origins: torch.Tensor, directions: torch.Tensor, half: float) -> tuple[torch.Tensor, torch.Tensor]:
-    """Slab test against [-half, half]^3: (t_enter, t_exit) (N,), t_enter >= 0; t_enter > t_exit on a miss."""
+    """geometry.ray_box against [-half, half]^3 from t = 0 on: (t_enter, t_exit) (N,), t_enter >= 0;
+    t_enter > t_exit on a miss."""
     with torch.no_grad():
-        inv = 1.0 / directions  # +-inf for zero components: the slab test still holds
-        t0 = (-half - origins) * inv
-        t1 = (half - origins) * inv
-        lo = torch.minimum(t0, t1).nan_to_num(nan=-float("inf"))
-        hi = torch.maximum(t0, t1).nan_to_num(nan=float("inf"))
-        return lo.amax(dim=1).clamp_min(0.0), hi.amin(dim=1)
+        enter, leave = ray_box(origins, directions, half)
+        return enter.clamp_min(0.0), leave
 
 
 def sphere_trace(field: TorchField, origins: np.ndarray, directions: np.ndarray, domain: float,

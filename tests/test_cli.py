@@ -9,6 +9,8 @@ import pytest
 
 from ddfbench.runs import RECORD_FIELDS, find_records
 
+pytestmark = pytest.mark.slow  # every test here starts `python -m ddfbench` in a subprocess
+
 SMALL = ["shape=cube", "model=mesh", "eval=smoke", "scene=none", "sampling=random", "sampling.n_samples=2000"]
 
 

@@ -9,7 +9,7 @@ import trimesh
 from omegaconf import OmegaConf
 
 from ddfbench.errors import InputError
-from ddfbench.models import ddf as ddf_module
+from ddfbench.models.ddf import family as ddf_module  # ONE_PASS_HIT_SHARE lives there
 from ddfbench.models import load_family
 from ddfbench.models.ddf import DDF, box_entry, fibonacci_directions, line_entry_labels, line_vote
 from ddfbench.oracle import Oracle
@@ -18,7 +18,7 @@ from ddfbench.samples import Samples
 
 R0 = 0.4
 CONF = os.path.join(os.path.dirname(__file__), "..", "conf", "model")
-SMALL = {"width": 128, "depth": 3, "pos_freqs": 4, "dir_freqs": 2, "batch_size": 2048, "lr": 3e-3, "vis_weight": 0.1,
+SMALL = {"width": 128, "depth": 3, "pos_freqs": 4, "dir_freqs": 2, "batch": 2048, "lr": 3e-3, "vis_weight": 0.1,
          "udf_directions": 16, "eval_batch": 16384}
 
 
@@ -237,19 +237,19 @@ def test_rays_missing_the_box_are_misses_without_evaluations(fitted):
 def test_save_load_round_trip_and_storage(fitted, tmp_path):
     rep, _ = fitted
     o, d = camera_rays(3000, 3)
-    folder = rep.save(str(tmp_path / "model"))
-    files = [os.path.join(folder, f) for f in os.listdir(folder)]
-    assert rep.storage_bytes() == sum(os.path.getsize(f) for f in files)
-    back = load_family("ddf").load(folder)
+    saved = rep.save(str(tmp_path / "model"))
+    assert os.listdir(tmp_path) == ["model.pt"]  # one file, published by rename (no temporary left)
+    assert rep.storage_bytes() == os.path.getsize(saved)
+    back = load_family("ddf").load(saved)
     a, b = rep.intersect(o, d), back.intersect(o, d)
     assert np.array_equal(a.t, b.t) and np.array_equal(a.normal, b.normal)
     assert back.n_params() == rep.n_params()
 
     half = DDF({**rep.cfg, "storage_dtype": "float16"})
     half.net.load_state_dict(rep.net.state_dict())
-    half.save(str(tmp_path / "half"))
+    half_path = half.save(str(tmp_path / "half"))
     assert half.storage_bytes() < 0.6 * rep.storage_bytes()
-    c = DDF.load(str(tmp_path / "half")).intersect(o, d, normals=False)
+    c = DDF.load(half_path).intersect(o, d, normals=False)
     both = c.hit & a.hit
     assert (c.hit == a.hit).mean() > 0.99 and np.abs(c.t[both] - a.t[both]).max() < 0.01
 
@@ -257,17 +257,18 @@ def test_save_load_round_trip_and_storage(fitted, tmp_path):
 def test_load_rejects_foreign_and_broken_artifacts(tmp_path):
     with pytest.raises(InputError):
         DDF.load(str(tmp_path / "missing"))
-    (tmp_path / "bad").mkdir()
-    (tmp_path / "bad" / "config.json").write_text('{"family": "mesh", "cfg": {}}')
-    torch.save({}, tmp_path / "bad" / "weights.pt")
-    with pytest.raises(InputError):
-        DDF.load(str(tmp_path / "bad"))
+    torch.save({}, tmp_path / "empty.pt")
+    with pytest.raises(InputError, match="unreadable"):
+        DDF.load(str(tmp_path / "empty.pt"))
+    torch.save({"header": '{"family": "mesh", "cfg": {}}', "state_dict": {}}, tmp_path / "foreign.pt")
+    with pytest.raises(InputError, match="holds family 'mesh'"):
+        DDF.load(str(tmp_path / "foreign.pt"))
 
 
 def test_paper_preset_builds_and_trains_a_few_steps(sphere_oracle):
     mesh, oracle = sphere_oracle
     cfg = OmegaConf.to_container(OmegaConf.load(os.path.join(CONF, "ddf_paper.yaml")))
-    rep = DDF({**cfg, "batch_size": 256})
+    rep = DDF({**cfg, "batch": 256})
     wn = [m for m in rep.net.modules() if isinstance(m, torch.nn.Linear) and hasattr(m, "parametrizations")]
     drop = [m for m in rep.net.modules() if isinstance(m, torch.nn.Dropout)]
     assert len(wn) == 8 and len(drop) == 8 and all(m.out_features == 512 for m in wn)

@@ -1,5 +1,6 @@
-"""Experiment configs: each expands to the grid it documents, and the smoke sweep runs end to end
-(a subprocess, as CI runs it) into records and report files that all parse."""
+"""Experiment configs: each expands to the grid it documents over the registered plugins (the models
+and samplers whose YAML joins it), and the smoke sweep runs end to end (a subprocess, as CI runs it)
+into records and report files that all parse."""
 
 import functools
 import json
@@ -11,12 +12,19 @@ import matplotlib.image
 import pandas as pd
 import pytest
 
-from ddfbench import CONF_DIR
+from ddfbench import CONF_DIR, plugins
 from ddfbench.report.plots import PLOTS_BY_EXPERIMENT
 from ddfbench.report.status import expected_grid
+from ddfbench.errors import InputError
+from ddfbench.models import load_family
 from ddfbench.runs import RECORD_FIELDS, find_records
 
-FAMILIES = {"mesh", "grid_sdf", "ddf", "ddf_paper", "neural_sdf", "gan_sdf"}
+FAMILIES = set(plugins.members("model", "smoke"))  # every model with a smoke level (the ddf_paper preset included)
+SAMPLERS = set(plugins.members("sampling", "smoke"))
+
+
+def n_members(group, experiment):
+    return len(plugins.members(group, experiment))
 
 
 @functools.lru_cache(maxsize=None)
@@ -34,13 +42,18 @@ def swept(job):
     return dict(o.split("=", 1) for o in job.swept)
 
 
-@pytest.mark.parametrize("experiment,n_jobs", [("ablation", 21), ("ablation_grid", 81), ("sampling", 36),
-                                               ("representations", 160), ("storage", 72), ("pareto", 72),
-                                               ("render_time", 63), ("smoke", 18)])
+@pytest.mark.parametrize("experiment,n_jobs", [
+    ("ablation", lambda: 7 * 3), ("ablation_grid", lambda: 27 * 3),                    # x 3 seeds
+    ("sampling", lambda: 4 * n_members("sampling", "sampling") * 3),                 # levels xs s m l
+    ("representations", lambda: 4 * n_members("model", "representations") * 5),     # 4 shapes, 5 seeds
+    ("storage", lambda: 4 * n_members("model", "storage") * 3),
+    ("pareto", lambda: 4 * n_members("model", "pareto") * 3),
+    ("render_time", lambda: 3 * n_members("model", "render_time") * 3),             # 3 image sizes
+    ("smoke", lambda: n_members("model", "smoke") * n_members("sampling", "smoke"))])
 def test_experiment_expands_to_its_documented_grid(experiment, n_jobs, tmp_path):
     jobs = grid(experiment)
-    assert len(jobs) == n_jobs
-    assert len({j.key for j in jobs}) == n_jobs  # every job is a distinct configuration
+    assert len(jobs) == n_jobs()
+    assert len({j.key for j in jobs}) == len(jobs)  # every job is a distinct configuration
 
 
 def test_ablation_is_one_factor_at_a_time_and_shares_records_with_the_grid(tmp_path):
@@ -61,10 +74,30 @@ def test_budget_overrides_and_seeds_change_the_grid(tmp_path):
     assert not {j.key for j in base} & {j.key for j in scaled}  # a budget is part of the record key
 
 
-def test_capacity_sweeps_cover_every_family(tmp_path):
+def test_the_built_in_plugins_join_the_documented_experiments():
+    """What the committed reports were made from: these lists change only when a YAML joins or leaves."""
+    assert FAMILIES == {"mesh", "grid_sdf", "ddf", "ddf_paper", "neural_sdf", "gan_sdf"}
+    assert SAMPLERS == set(plugins.members("sampling", "sampling")) == {"random", "pov", "surface"}
+    assert set(plugins.members("model", "default")) == {"mesh", "mesh_lod2000", "mesh_lod500", "grid_sdf",
+                                                        "neural_sdf", "ddf"}
+    for experiment in ("storage", "pareto"):
+        assert set(plugins.members("model", experiment)) == FAMILIES
+
+
+def test_capacity_sweeps_cover_every_registered_model(tmp_path):
     for experiment in ("storage", "pareto", "smoke"):
-        families = {swept(j)["+experiment/capacity"] for j in grid(experiment)}
-        assert families == FAMILIES, experiment
+        families = {swept(j)["model"] for j in grid(experiment)}
+        assert families == set(plugins.members("model", experiment)), experiment
+
+
+def test_a_level_is_a_partial_config_merged_onto_the_job():
+    base = {"experiment_name": "pareto", "capacity": "c2", "train": {"max_seconds": 45, "max_steps": 9},
+            "model": plugins.plugin_yaml("model", "ddf"), "sampling": plugins.plugin_yaml("sampling", "random")}
+    job = plugins.job_config(base)
+    assert (job["model"]["width"], job["model"]["depth"]) == (128, 4) and "experiments" not in job["model"]
+    assert "experiments" not in job["sampling"] and job["train"] == base["train"]
+    with pytest.raises(InputError, match="capacity=c9: model ddf has no such level for experiment pareto"):
+        plugins.job_config({**base, "capacity": "c9"})
 
 
 @pytest.mark.parametrize("experiment", ["storage", "pareto"])
@@ -72,15 +105,17 @@ def test_gan_sdf_levels_set_its_fit_steps_and_others_keep_their_models(experimen
     """gan_sdf's network is fixed: its capacity level is train.max_steps, taken from the level's row."""
     from hydra import compose, initialize_config_dir
 
+    from omegaconf import OmegaConf
+
     with initialize_config_dir(CONF_DIR, version_base="1.3"):
         def composed(family, level):
-            return compose("config", overrides=[f"+experiment/capacity={family}", f"capacity={level}",
-                                                f"+experiment={experiment}"])
+            cfg = compose("config", overrides=[f"+experiment={experiment}", f"model={family}", f"capacity={level}"])
+            return plugins.job_config(OmegaConf.to_container(cfg, resolve=True))
         levels = ("c1", "c2", "c3", "c4")
         gan = {lv: composed("gan_sdf", lv) for lv in levels}
-        ddf = {(c := composed("ddf", lv)).train.max_steps: c.model.fit_steps for lv in levels}
-    budgets = [gan[lv].train.max_steps for lv in levels]
-    assert budgets == [gan[lv].capacities.gan_sdf[lv].max_steps for lv in levels]
+        ddf = {(c := composed("ddf", lv))["train"]["max_steps"]: c["model"]["fit_steps"] for lv in levels}
+    budgets = [gan[lv]["train"]["max_steps"] for lv in levels]
+    assert budgets == [plugins.levels("model", "gan_sdf", experiment)[lv]["train"]["max_steps"] for lv in levels]
     assert len(set(budgets)) == 4 and len(ddf) == 1  # the bug this guards against: one budget for all levels
     assert list(ddf.items())[0][0] == list(ddf.items())[0][1]  # other families: their model's fit_steps
 
@@ -110,6 +145,7 @@ def test_sampling_fits_matched_label_counts_per_level():
     assert labels == {(s, z): n for s in ("random", "pov", "surface") for z, n in (("xs", 10000), ("l", 640000))}
 
 
+@pytest.mark.slow
 def test_smoke_runs_every_family_and_strategy_and_reports(tmp_path):
     env = dict(os.environ, PYTHONUNBUFFERED="1")
     run = subprocess.run([sys.executable, "-m", "ddfbench", "+experiment=smoke", f"out_dir={tmp_path}", "quiet=true"],
@@ -122,7 +158,12 @@ def test_smoke_runs_every_family_and_strategy_and_reports(tmp_path):
         assert set(RECORD_FIELDS) <= set(rec)
         assert rec["status"] == "ok", (rec["key"], rec["error"])
     assert {r["model"] for r in records} == FAMILIES  # the ddf_paper preset is family ddf
-    assert {r["sampling"]["strategy"] for r in records} == {"random", "pov", "surface"}
+    assert {r["sampling"]["strategy"] for r in records} == SAMPLERS | {None}  # None: a family that needs no samples
+    assert all(load_family(f).sample_kind is None for f in ("mesh", "grid_sdf"))
+    for rec in records:  # a family that builds from the mesh gets no samples, and its record says so
+        no_samples = load_family(rec["family"]).sample_kind is None
+        assert no_samples == (rec["sampling"]["kind"] is None) == ("sampling_s" not in rec["cost"]), rec["key"]
+        assert no_samples == ("n_samples" not in rec["sampling"]), rec["key"]
 
     out = tmp_path / "report"
     rep = subprocess.run([sys.executable, "-m", "ddfbench.report", str(tmp_path / "smoke"), "--out", str(out)],
@@ -136,7 +177,7 @@ def test_smoke_runs_every_family_and_strategy_and_reports(tmp_path):
     tex = (out / "table.tex").read_text()
     assert tex.startswith(r"\begin{tabular}") and r"\end{tabular}" in tex and tex.count("{") == tex.count("}")
     report = (out / "report.md").read_text()
-    assert "done 18  failed 0  missing 0" in report and all(k in report for k in expected)
+    assert f"done {len(expected)}  failed 0  missing 0" in report and all(k in report for k in expected)
     for kind in PLOTS_BY_EXPERIMENT["smoke"]:
         image = matplotlib.image.imread(out / f"{kind}.png")
         assert image.ndim == 3 and image.shape[0] > 100 and image.shape[1] > 100

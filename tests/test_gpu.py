@@ -16,7 +16,7 @@ import torch
 
 from ddfbench.bench.oracle import incoherent_rays
 from ddfbench.shapes import load_shape
-from ddfbench.trace_bench import pinhole_rays
+from ddfbench.bench.views import view_rays
 from tests.hard_cases.conftest import compose, has_family, has_warp
 
 DEVICE = os.environ.get("DDFBENCH_GPU_TEST_DEVICE", "cuda")
@@ -33,7 +33,7 @@ FAMILIES = [f for f in TOLERANCE if has_family(f)]
 
 
 def rays() -> tuple[np.ndarray, np.ndarray]:
-    o1, d1 = pinhole_rays(32)
+    o1, d1 = view_rays(32)
     o2, d2 = incoherent_rays(1000, seed=3)
     return np.vstack([o1, o2]), np.vstack([d1, d2])
 

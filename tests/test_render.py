@@ -42,6 +42,7 @@ class AnalyticSphere(Representation):
     normals and 3 trace steps per ray, so the counting layer's tallies can be checked exactly."""
 
     family = "analytic_sphere"
+    configure = classmethod(lambda cls, cfg: dict(cfg))  # a test double: no conf/model YAML to check cfg against
 
     def __init__(self, radius: float = 0.4, center=(0.0, 0.0, 0.0)):
         super().__init__({})

@@ -229,7 +229,7 @@ def test_ablation_lines_take_one_factor_at_a_time():
 def test_sampling_lines_follow_labels_per_strategy_and_skip_meshes():
     recs = [make_record(sampling={"strategy": s, "n_samples": n}, chamfer=1 / n)
             for s in ("random", "pov") for n in (4000, 1000, 2000)]
-    recs.append(make_record(model="mesh", sampling={"strategy": "random", "n_samples": 10}))
+    recs.append(make_record(model="mesh", sampling={"strategy": None, "kind": None}))  # a mesh draws no samples
     recs.append(make_record(sampling={"strategy": "pov", "n_samples": 8000}, status="failed"))
     lines = plots.sampling_lines(recs)
     assert set(lines) == {("ddf", "random"), ("ddf", "pov")}

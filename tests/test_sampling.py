@@ -5,26 +5,24 @@ import os
 import numpy as np
 import pytest
 import trimesh
-import yaml
 
+from ddfbench import plugins
 from ddfbench.errors import InputError
 from ddfbench.oracle import Oracle
 from ddfbench.samples import Samples
 from ddfbench.sampling import available_strategies, build
-from ddfbench.sampling.box import box_interval
 from ddfbench.sampling.collect import Collector
 from ddfbench.sampling.directions import paper_eq10_directions, random_perpendicular, uniform_directions
 from ddfbench.sampling.steps import marching_distances
 from ddfbench.sampling.triangles import barycentric, face_plan
 from ddfbench.shapes import Shape, load_shape
 
-CONF = os.path.join(os.path.dirname(__file__), "..", "conf", "sampling")
 
 
 def config(strategy, **overrides):
-    """conf/sampling/<strategy>.yaml with the field box resolved and overrides applied."""
-    with open(os.path.join(CONF, f"{strategy}.yaml")) as f:
-        cfg = yaml.safe_load(f)
+    """conf/sampling/<strategy>.yaml (its config, not the experiments it joins) with the field box
+    resolved and overrides applied."""
+    cfg = plugins.defaults("sampling", strategy)
     cfg["box"] = 0.6
     cfg.update(overrides)
     return cfg
@@ -153,19 +151,6 @@ def test_marching_distances_stay_in_range_and_ascend(rng, rule):
         assert np.mean(t[:, 3] < np.sqrt(1e-3 * hi)) > 0.3
 
 
-def test_box_interval_matches_a_brute_force_march(rng):
-    o = rng.uniform(-1, 1, (200, 3))
-    d = uniform_directions(rng, 200).astype(np.float64)
-    t_in, t_out = box_interval(o, d, -0.5, 0.5)
-    s = np.linspace(-4, 4, 8001)
-    inside = np.all(np.abs(o[:, None] + s[None, :, None] * d[:, None]) <= 0.5, axis=2)
-    for i in range(200):
-        if inside[i].any():
-            assert abs(s[inside[i]].min() - t_in[i]) < 2e-3 and abs(s[inside[i]].max() - t_out[i]) < 2e-3
-        else:
-            assert t_in[i] > t_out[i]
-
-
 def test_face_plan_skips_zero_area_faces(rng):
     v = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [2, 0, 0], [0, 0, 1]], float)
     f = np.array([[0, 1, 2], [0, 1, 3], [0, 1, 4]])  # face 1 is degenerate (collinear)
@@ -269,3 +254,20 @@ def test_zero_area_faces_of_an_unvalidated_mesh_are_never_sampled(rng, tmp_path)
     samples, _, info = build(shape, Oracle(mesh), cfg, "rays", 0, str(tmp_path))
     assert info["n_points"] == 5 * 12
     recheck_rays(shape, samples, rng)
+
+
+def _build_in_process(cache_dir):
+    shape = load_shape({"name": "sphere"})
+    return build(shape, Oracle(shape.mesh), config("random", n_samples=20000), "rays", 0, cache_dir)[1]
+
+
+@pytest.mark.slow
+def test_two_processes_building_one_dataset_leave_one_complete_file(tmp_path):
+    """Two runs that need the same dataset at once (a sweep under a parallel launcher) both build it;
+    the cache ends with one complete file and no temporaries."""
+    import multiprocessing
+
+    with multiprocessing.get_context("spawn").Pool(2) as pool:
+        paths = pool.map(_build_in_process, [str(tmp_path)] * 2)
+    assert paths[0] == paths[1] and os.listdir(tmp_path) == [os.path.basename(paths[0])]
+    assert len(Samples.load_npz(paths[0])) == 20000

@@ -17,7 +17,7 @@ from ddfbench.models.neural_sdf import clamped_l1
 from ddfbench.oracle import Oracle
 from ddfbench.representation import Budget, FitData, RayStatus
 from ddfbench.shapes import load_shape
-from ddfbench.trace_bench import oracle_sdf_samples
+from ddfbench.sampling.oracle_sdf import oracle_sdf_samples
 
 RADIUS = 0.5  # the catalog sphere, normalized: an icosphere of radius 0.5 (faceted: gaps below 4e-4)
 DOMAIN = 0.6
@@ -209,6 +209,7 @@ def test_neural_sdf_geometric_init_is_a_sphere():
     assert np.abs(plain.sdf(p) - ref).mean() > 0.1
 
 
+@pytest.mark.slow
 def test_neural_sdf_fits_the_sphere(sphere, tmp_path):
     mesh, oracle, samples = sphere
     rep = load_family("neural_sdf")({**SMALL_NET, "w_eikonal": 0.05}, DOMAIN)
@@ -305,6 +306,7 @@ def test_gan_sdf_epochs_cap_the_steps(sphere):
     assert stats.steps == 4  # 0.01 of 20,000 samples at 64 per step: 3.1 steps, rounded up
 
 
+@pytest.mark.slow
 def test_gan_sdf_seed_sweep_reports_its_failure_rate(sphere, tmp_path):
     """Several seeds of the thesis loss (least squares, targets x4) plus the L1 anchor on the sphere;
     failures are counted, not hidden.

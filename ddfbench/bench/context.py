@@ -2,31 +2,28 @@
 
 from __future__ import annotations
 
-import os
 from dataclasses import dataclass, field
 from typing import Any
 
 from omegaconf import OmegaConf
 
-from ddfbench import CONF_DIR
+from ddfbench import plugins
+from ddfbench.geometry import BOX_HALF
 from ddfbench.oracle import Oracle
 from ddfbench.shapes import Shape, load_shape
 
-DOMAIN = 0.6  # conf/config.yaml `domain`: half-side of the field box
+DOMAIN = BOX_HALF  # conf/config.yaml `domain`: half-side of the field box
 
 
 def preset(group: str, name: str, **overrides: Any) -> dict[str, Any]:
-    """conf/<group>/<name>.yaml as a plain dict (${domain} resolved), with overrides applied."""
-    path = os.path.join(CONF_DIR, group, f"{name}.yaml")
-    root = OmegaConf.create({"domain": DOMAIN, "node": OmegaConf.load(path)})
+    """conf/<group>/<name>.yaml's config as a plain dict (${domain} resolved), with overrides applied."""
+    root = OmegaConf.create({"domain": DOMAIN, "node": plugins.defaults(group, name)})
     return {**OmegaConf.to_container(root, resolve=True)["node"], **overrides}
 
 
 def model_preset(family: str, **overrides: Any) -> dict[str, Any]:
-    """conf/model/<family>.yaml with overrides; the family's built-in defaults where it has no preset."""
-    if os.path.exists(os.path.join(CONF_DIR, "model", f"{family}.yaml")):
-        return preset("model", family, **overrides)
-    return {"family": family, **overrides}
+    """conf/model/<family>.yaml with overrides."""
+    return preset("model", family, **overrides)
 
 
 @dataclass

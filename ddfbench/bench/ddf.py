@@ -1,7 +1,7 @@
 """Section 3, DDF ray answering: DDF.intersect against the bare network on the same rays, and against
 Embree (the mesh family) on the same rays: the DDF paper's speed claim, measured here.
 
-Rays: one pinhole camera looking at the shape (ddfbench.trace_bench.pinhole_rays). The DDF is the
+Rays: one pinhole camera looking at the shape (ddfbench.bench.views.view_rays). The DDF is the
 conf/model/ddf.yaml preset (sizes may override width/depth) with untrained weights: the cost of a
 forward pass does not depend on the weights' values. Its visibility head is biased so that every ray
 is a hit, the worst case for normal work (every ray then needs a backward pass).
@@ -24,7 +24,7 @@ from ddfbench.bench.timing import measure_side_by_side, precisions
 from ddfbench.models import load_family
 from ddfbench.models.ddf import DDF, box_entry
 from ddfbench.representation import Budget, FitData
-from ddfbench.trace_bench import pinhole_rays
+from ddfbench.bench.views import view_rays
 
 TARGET = Target(">=", 0.8)
 ALL_HIT_BIAS = 20.0  # visibility logit bias: sigmoid(20) = 1 - 2e-9
@@ -61,7 +61,7 @@ def mesh_rep(ctx: Context, shape_name: str, backend: str):
 
 def run(ctx: Context) -> SectionResult:
     s = ctx.sizes
-    o, d = pinhole_rays(int(s["px"]))
+    o, d = view_rays(int(s["px"]))
     n = len(o)
     t_entry, _, meets = box_entry(o, d, DOMAIN)
     x_np = o[meets] + t_entry[meets, None] * d[meets]

@@ -1,7 +1,7 @@
 """Section 2, oracle: first-hit rays/s of each backend (open3d, embreex, and Warp's BVH on the CPU where
 the `gpu` extra is installed) on primary and incoherent rays.
 
-Primary rays: one pinhole camera looking at the shape (ddfbench.trace_bench.pinhole_rays): coherent,
+Primary rays: one pinhole camera looking at the shape (ddfbench.bench.views.view_rays): coherent,
 neighbouring rays walk the same BVH nodes. Incoherent rays: origins uniform in the field box,
 directions uniform on the sphere. The reference for each is open3d's bare
 RaycastingScene.cast_rays on the very same rays, so the ratio of the open3d backend is what the
@@ -19,7 +19,7 @@ import open3d as o3d
 from ddfbench.bench.context import DOMAIN, Context
 from ddfbench.bench.results import SectionResult, compare
 from ddfbench.bench.timing import measure_side_by_side
-from ddfbench.trace_bench import pinhole_rays
+from ddfbench.bench.views import view_rays
 
 BACKENDS = ("open3d", "embree") + (("warp",) if importlib.util.find_spec("warp") else ())
 
@@ -44,7 +44,7 @@ def run(ctx: Context) -> SectionResult:
     shape = ctx.shape(s["shape"])
     scene = bare_scene(shape.mesh)
     result = SectionResult(details={"faces": int(len(shape.mesh.faces))})
-    for kind, (o, d) in (("primary", pinhole_rays(int(s["primary_px"]))),
+    for kind, (o, d) in (("primary", view_rays(int(s["primary_px"]))),
                          ("incoherent", incoherent_rays(int(s["incoherent_rays"])))):
         rays = o3d.core.Tensor(np.hstack([o, d]).astype(np.float32))
         oracles = {backend: ctx.oracle(s["shape"], backend) for backend in BACKENDS}

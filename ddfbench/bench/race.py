@@ -29,19 +29,18 @@ from typing import Callable
 
 import numpy as np
 import torch
-from omegaconf import OmegaConf
 
-from ddfbench import CONF_DIR
+from ddfbench import plugins
 from ddfbench.bench.context import Context, model_preset, preset
 from ddfbench.bench.oracle import incoherent_rays
 from ddfbench.bench.results import SectionResult, Target, compare
 from ddfbench.bench.timing import Timing, measure_side_by_side
+from ddfbench.bench.views import view_rays
 from ddfbench.bench.tracing import grid_sdf, neural_sdf
 from ddfbench.ddf_infer import DDFDepth, box_entry_torch
 from ddfbench.models.ddf import DDF
 from ddfbench.representation import Budget, FitData
 from ddfbench.sampling import surface
-from ddfbench.trace_bench import pinhole_rays
 
 SPEED_GOAL = Target(">=", 1e9, on="value")  # compiled bf16 DDF rays/s at 1M+ rays on an H100/H200 (issue 17)
 BARE_SHARE = Target(">=", 0.8)  # compiled bf16 DDF against the bare bf16 forward of the same network
@@ -56,9 +55,8 @@ def accuracy(t: np.ndarray, t_ref: np.ndarray) -> dict[str, float]:
 
 
 def pareto_ddf_capacities() -> dict[str, dict]:
-    """conf/experiment/pareto.yaml capacities.ddf: {"c1": overrides, ...}."""
-    cfg = OmegaConf.load(os.path.join(CONF_DIR, "experiment", "pareto.yaml"))
-    return OmegaConf.to_container(cfg.capacities.ddf)
+    """The DDF's pareto levels (conf/model/ddf.yaml, experiments.pareto): {"c1": model overrides, ...}."""
+    return {level: dict(part.get("model") or {}) for level, part in plugins.levels("model", "ddf", "pareto").items()}
 
 
 def train_ddf(ctx: Context, samples, overrides: dict) -> tuple[DDF, dict]:
@@ -134,7 +132,7 @@ def run(ctx: Context) -> SectionResult:
         "neural_sdf_trace": lambda o, d, on, dn: _sdf_t(nsdf, on, dn),
         "grid_sdf_trace": lambda o, d, on, dn: _sdf_t(gsdf, on, dn),
     })
-    ray_sets = {"primary": pinhole_rays(int(s["px"])), "incoherent": incoherent_rays(int(s["incoherent_rays"]), seed=1)}
+    ray_sets = {"primary": view_rays(int(s["px"])), "incoherent": incoherent_rays(int(s["incoherent_rays"]), seed=1)}
     for set_name, (o_np, d_np) in ray_sets.items():
         n = len(o_np)
         o_dev, d_dev = torch.as_tensor(o_np, device=ctx.device), torch.as_tensor(d_np, device=ctx.device)

@@ -1,10 +1,8 @@
 """Problem sizes per section: "default" (the committed run: the bunny, the issue's sizes; about 3 min
 on 2 idle CPU cores, 16 min when a sweep shares them) and "small" (tiny shapes and networks, seconds:
-for tests and quick checks)."""
+for tests and quick checks). The training section runs every learned family (ddfbench.models.learned_families)."""
 
 from __future__ import annotations
-
-LEARNED_FAMILIES = ["ddf", "neural_sdf", "gan_sdf"]
 
 SIZES: dict[str, dict[str, dict]] = {
     "default": {
@@ -16,7 +14,7 @@ SIZES: dict[str, dict[str, dict]] = {
                     "grid_resolution": 128, "neural": {}},
         "grid": {"shape": "bunny", "resolutions": [64, 128, 256], "exact_full_max": 64, "exact_sample": 300_000},
         "metrics": {"shape": "bunny", "points": [10_000, 100_000, 1_000_000], "repeats_max_points": 100_000},
-        "training": {"shape": "bunny", "families": LEARNED_FAMILIES, "steps": 20, "overrides": {}},
+        "training": {"shape": "bunny", "steps": 20, "overrides": {}},
         "end_to_end": {"runs": [{"name": "default run", "args": []},
                                 {"name": "smoke sweep", "args": ["+experiment=smoke"]}]},
         # GPU scale (run by default on CUDA only): 1M primary and 1M incoherent rays, 1k..16M sweep
@@ -33,8 +31,8 @@ SIZES: dict[str, dict[str, dict]] = {
                     "grid_resolution": 16, "neural": {"width": 16, "depth": 2, "batch": 512}},
         "grid": {"shape": "sphere", "resolutions": [12, 20], "exact_full_max": 12, "exact_sample": 2000},
         "metrics": {"shape": "sphere", "points": [1000, 3000], "repeats_max_points": 1000},
-        "training": {"shape": "sphere", "families": LEARNED_FAMILIES, "steps": 3,
-                     "overrides": {"ddf": {"width": 32, "depth": 2, "batch_size": 256},
+        "training": {"shape": "sphere", "steps": 3,
+                     "overrides": {"ddf": {"width": 32, "depth": 2, "batch": 256},
                                    "neural_sdf": {"width": 16, "depth": 2, "batch": 256},
                                    "gan_sdf": {"batch": 128}}},
         "end_to_end": {"runs": [{"name": "tiny single run",
@@ -42,6 +40,6 @@ SIZES: dict[str, dict[str, dict]] = {
                                           "sampling.n_samples=2000"]}]},
         "race": {"shape": "sphere", "px": 12, "incoherent_rays": 300, "sweep": [100, 400], "embree_max": 100,
                  "fit_seconds": 0.3, "n_samples": 3000, "grid_resolution": 16, "chunk": 128, "compile": False,
-                 "capacities": True, "model": {"batch_size": 256}, "neural": {"width": 16, "depth": 2, "batch": 256}},
+                 "capacities": True, "model": {"batch": 256}, "neural": {"width": 16, "depth": 2, "batch": 256}},
     },
 }

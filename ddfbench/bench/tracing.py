@@ -1,10 +1,10 @@
 """Section 4, sphere tracing: field evaluations per pixel and time of ddfbench's tracer against the
-naive all-rays loop (ddfbench.trace_bench.naive_trace: every ray every step, the field evaluated
+naive all-rays loop (naive_trace below: every ray every step, the field evaluated
 twice per step, for max_steps steps), for a neural SDF and a grid SDF of the shape.
 
 The neural SDF is the conf/model/neural_sdf.yaml preset trained here for `fit_seconds` on oracle SDF
-samples (trace_bench.oracle_sdf_samples); the grid SDF is a level-set grid at `grid_resolution`.
-Both render one pinhole view (trace_bench.pinhole_rays) of `px`^2 rays. The naive loop is run once
+samples (ddfbench.sampling.oracle_sdf); the grid SDF is a level-set grid at `grid_resolution`.
+Both render one pinhole view (ddfbench.bench.views.view_rays) of `px`^2 rays. The naive loop is run once
 (it is long and has no lazy setup: the tracer's runs before it warm everything), the tracer
 1 + warmup + repeats times. Agreement of the hit masks with the oracle is in the details.
 Sizes: shape, neural_px, grid_px, fit_seconds, n_samples, grid_resolution, neural (model overrides).
@@ -13,17 +13,35 @@ Sizes: shape, neural_px, grid_px, fit_seconds, n_samples, grid_resolution, neura
 from __future__ import annotations
 
 import numpy as np
+import torch
 
 from ddfbench.bench.context import Context, model_preset
+from ddfbench.bench.views import view_rays
 from ddfbench.bench.results import SectionResult, Target, compare
 from ddfbench.bench.timing import measure, once, precisions
 from ddfbench.models.grid_sdf import GridSDF
 from ddfbench.models.neural_sdf import NeuralSDF
 from ddfbench.representation import Budget, FitData
-from ddfbench.trace import sphere_trace
-from ddfbench.trace_bench import naive_trace, oracle_sdf_samples, pinhole_rays
+from ddfbench.sampling.oracle_sdf import oracle_sdf_samples
+from ddfbench.trace import TorchField, clip_to_box, sphere_trace
 
 TARGET = Target(">=", 3.0)
+
+
+def naive_trace(field: TorchField, origins: np.ndarray, directions: np.ndarray, domain: float,
+                eps: float = 1e-5, eps_abs: float = 1e-6, max_steps: int = 256) -> tuple[np.ndarray, int]:
+    """The baseline loop: every ray every step, field evaluated twice per step. Returns (t (inf unless hit), evals)."""
+    o, d = torch.from_numpy(origins), torch.from_numpy(directions)
+    t_enter, t_exit = clip_to_box(o, d, domain)
+    t = t_enter.clone()
+    evals = 0
+    with torch.no_grad():
+        for _ in range(max_steps):
+            t = t + field(o + t[:, None] * d)
+            f = field(o + t[:, None] * d)
+            evals += 2 * len(t)
+        hit = (f.abs() < eps * t + eps_abs) & (t_enter <= t_exit) & (t <= t_exit)
+    return torch.where(hit, t, torch.full_like(t, float("inf"))).numpy(), evals
 
 
 def neural_sdf(ctx: Context) -> tuple[NeuralSDF, dict]:
@@ -59,7 +77,7 @@ def run(ctx: Context) -> SectionResult:
     for name, build, px, precs in (("neural_sdf", neural_sdf, s["neural_px"], precisions(ctx.device)),
                                    ("grid_sdf", grid_sdf, s["grid_px"], ["fp32"])):
         rep, info = build(ctx)
-        o, d = pinhole_rays(int(px))
+        o, d = view_rays(int(px))
         n = len(o)
         gt_hit = np.isfinite(oracle.hit_distance(o, d))
         for prec in (p for p in precs if p != "bf16"):  # the hit tolerance (1e-5) is below bf16's resolution

@@ -5,13 +5,11 @@ eikonal double backward, discriminator) and the shared training loop keep of the
 
 Data: surface samples of the family's kind from the conf/sampling/surface.yaml preset. The fit runs
 `steps` steps; its warm rate leaves out the first (cold) step, read off the loss curve.
-Sizes: shape, families (list; a family whose module is absent, or whose fit fails, gets a note), steps,
-overrides {family: {model keys}}.
+Families: every registered family that is learned (a family whose fit fails gets a note).
+Sizes: shape, steps, overrides {family: {model keys}}.
 """
 
 from __future__ import annotations
-
-import importlib.util
 
 import numpy as np
 import torch
@@ -19,17 +17,14 @@ import torch
 from ddfbench.bench.context import Context, model_preset, preset
 from ddfbench.bench.results import Row, SectionResult, compare
 from ddfbench.bench.timing import measure, once, precisions
-from ddfbench.models import load_family
+from ddfbench.models import learned_families, load_family
 from ddfbench.representation import Budget, FitData
 from ddfbench.sampling import line_hits, surface
 
 
 def batch_size(rep, stats) -> int:
-    """Samples per step: the fit's own report, else the preset's batch_size / batch key."""
-    for value in (stats.extra.get("batch_size"), rep.cfg.get("batch_size"), rep.cfg.get("batch")):
-        if value:
-            return int(value)
-    raise KeyError(f"{rep.family}: neither FitStats.extra nor the preset names a batch size")
+    """Samples per step: the fit's own report, else the family's `batch` key (one spelling in every family)."""
+    return int(stats.extra.get("batch_size") or rep.cfg["batch"])
 
 
 def warm_rate(stats, batch: int) -> float:
@@ -92,10 +87,7 @@ def family_rows(ctx: Context, family: str, samples_by_kind: dict, details: dict)
 
 def run(ctx: Context) -> SectionResult:
     result, samples_by_kind = SectionResult(), {}
-    for family in ctx.sizes["families"]:
-        if importlib.util.find_spec(f"ddfbench.models.{family}") is None:
-            result.notes.append(f"{family}: skipped, no module ddfbench/models/{family}.py")
-            continue
+    for family in learned_families():
         try:
             result.rows += family_rows(ctx, family, samples_by_kind, result.details)
         except Exception as err:  # one family's failure leaves the others' figures standing

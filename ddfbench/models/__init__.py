@@ -1,4 +1,8 @@
-"""Shape families: one module per family, each exposing its Representation subclass as FAMILY."""
+"""Shape families: one module per family, each exposing its Representation subclass as FAMILY.
+
+A family is registered by being here (with its conf/model/<family>.yaml); what the rest of the program
+needs to know about it is on the class: sample_kind, learned, configure (see ddfbench.representation).
+"""
 
 from __future__ import annotations
 
@@ -20,3 +24,8 @@ def load_family(name: str) -> type[Representation]:
         raise InputError(f"model.family '{name}': unknown family (available: {', '.join(available_families())})")
     module = importlib.import_module(f"ddfbench.models.{name}")
     return module.FAMILY
+
+
+def learned_families() -> list[str]:
+    """The registered families whose fit trains something (Representation.learned)."""
+    return [name for name in available_families() if load_family(name).learned]

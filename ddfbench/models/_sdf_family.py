@@ -10,9 +10,6 @@ The model config's optional `trace` mapping sets TraceOptions.
 from __future__ import annotations
 
 import abc
-import json
-import os
-import pickle
 from typing import Any, Mapping
 
 import numpy as np
@@ -21,6 +18,7 @@ import trimesh
 
 from ddfbench import extract
 from ddfbench.errors import InputError
+from ddfbench.geometry import BOX_HALF
 from ddfbench.representation import Hits, Representation
 from ddfbench.trace import TraceOptions, autograd_normals, sphere_trace, to_hits
 
@@ -32,7 +30,7 @@ class SDFFamily(Representation):
 
     needs_closed_surface = True  # signs come from the inside test
 
-    def __init__(self, cfg: Mapping[str, Any], domain: float = 0.6):
+    def __init__(self, cfg: Mapping[str, Any], domain: float = BOX_HALF):
         super().__init__(cfg, domain)
         self.trace_options = TraceOptions.from_cfg(self.cfg)
         self.device = "cpu"
@@ -85,6 +83,7 @@ class NetSDFFamily(SDFFamily):
     """An SDF family whose field is the torch module `self.net` (built by the subclass's __init__ from cfg)."""
 
     net: torch.nn.Module
+    learned = True
 
     def field(self, points: torch.Tensor) -> torch.Tensor:
         return self.net(points)
@@ -99,22 +98,15 @@ class NetSDFFamily(SDFFamily):
         return int(sum(p.numel() for p in self.net.parameters()))
 
     def save(self, path: str) -> str:
-        if not path.endswith(".pt"):
-            path = f"{path}.pt"
-        header = {"family": self.family, "domain": self.domain, "cfg": self.cfg}
-        state = {k: v.detach().cpu() for k, v in self.net.state_dict().items()}
-        tmp = f"{path}.tmp{os.getpid()}"
-        torch.save({"header": json.dumps(header), "state_dict": state}, tmp)
-        return self._publish(tmp, path)
+        return self._save_network(path, {k: v.detach().cpu() for k, v in self.net.state_dict().items()})
 
     @classmethod
-    def load(cls, path: str, domain: float = 0.6) -> "NetSDFFamily":
+    def load(cls, path: str, domain: float = BOX_HALF) -> "NetSDFFamily":
+        header, state = cls._read_network(path)
         try:
-            blob = torch.load(path, map_location="cpu", weights_only=True)
-            header = json.loads(blob["header"])
             rep = cls(header["cfg"], float(header["domain"]))
-            rep.net.load_state_dict(blob["state_dict"])
-        except (OSError, RuntimeError, KeyError, ValueError, TypeError, pickle.UnpicklingError) as exc:
+            rep.net.load_state_dict(state)
+        except (RuntimeError, KeyError, ValueError, TypeError) as exc:
             raise InputError(f"{cls.family} artifact {path}: unreadable ({str(exc).splitlines()[0]})") from None
         rep.net.eval()
         rep._saved_path = path

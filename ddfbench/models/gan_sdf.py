@@ -41,6 +41,7 @@ import torch.nn.functional as F
 from torch import nn
 
 from ddfbench.errors import InputError
+from ddfbench.geometry import BOX_HALF
 from ddfbench.models._sdf_family import NetSDFFamily
 from ddfbench.models.neural_sdf import clamped_l1
 from ddfbench.representation import Budget, FitData, FitStats, Probe
@@ -111,7 +112,7 @@ class GanSDF(NetSDFFamily):
     family = "gan_sdf"
     sample_kind = "sdf"
 
-    def __init__(self, cfg: Mapping[str, Any], domain: float = 0.6):
+    def __init__(self, cfg: Mapping[str, Any], domain: float = BOX_HALF):
         super().__init__(cfg, domain)
         near_surface_term(torch.zeros(1), torch.zeros(1), str(self.cfg.get("near_term", "exp")))  # validates
         adversarial_losses(str(self.cfg.get("adversarial", "least_squares")))  # validates

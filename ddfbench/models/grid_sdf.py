@@ -22,6 +22,7 @@ import torch.nn.functional as F
 
 from ddfbench import levelset
 from ddfbench.errors import InputError
+from ddfbench.geometry import BOX_HALF
 from ddfbench.models._sdf_family import SDFFamily
 from ddfbench.representation import Budget, FitData, FitStats, Probe
 from ddfbench.trace import central_difference_normals
@@ -35,7 +36,7 @@ class GridSDF(SDFFamily):
     family = "grid_sdf"
     sample_kind = None
 
-    def __init__(self, cfg: Mapping[str, Any], domain: float = 0.6):
+    def __init__(self, cfg: Mapping[str, Any], domain: float = BOX_HALF):
         super().__init__(cfg, domain)
         self.resolution = int(self.cfg.get("resolution", 128))
         self.build = str(self.cfg.get("build", "auto"))
@@ -101,7 +102,7 @@ class GridSDF(SDFFamily):
         return self._publish(tmp, path)
 
     @classmethod
-    def load(cls, path: str, domain: float = 0.6) -> "GridSDF":
+    def load(cls, path: str, domain: float = BOX_HALF) -> "GridSDF":
         try:
             with np.load(path, allow_pickle=False) as z:
                 header, grid = json.loads(str(z["header"])), z["sdf"]

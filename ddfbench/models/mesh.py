@@ -13,6 +13,7 @@ import numpy as np
 import pymeshlab
 import trimesh
 
+from ddfbench.geometry import BOX_HALF
 from ddfbench.oracle import Oracle
 from ddfbench.representation import Budget, FitData, FitStats, Hits, Probe, RayStatus, Representation
 
@@ -40,7 +41,7 @@ class MeshFamily(Representation):
     family = "mesh"
     sample_kind = None
 
-    def __init__(self, cfg: Mapping[str, Any], domain: float = 0.6):
+    def __init__(self, cfg: Mapping[str, Any], domain: float = BOX_HALF):
         super().__init__(cfg, domain)
         self.mesh: trimesh.Trimesh | None = None
         self._oracle: Oracle | None = None
@@ -105,7 +106,7 @@ class MeshFamily(Representation):
         return path
 
     @classmethod
-    def load(cls, path: str, domain: float = 0.6) -> "MeshFamily":
+    def load(cls, path: str, domain: float = BOX_HALF) -> "MeshFamily":
         rep = cls({"faces": 0}, domain)
         rep._set_mesh(trimesh.load(path, force="mesh", process=False))
         rep._saved_path = path

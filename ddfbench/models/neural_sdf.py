@@ -29,27 +29,12 @@ import torch
 from torch import nn
 
 from ddfbench.errors import InputError
+from ddfbench.geometry import BOX_HALF, FourierFeatures
 from ddfbench.models._sdf_family import NetSDFFamily
 from ddfbench.representation import Budget, FitData, FitStats, Probe
 from ddfbench.train import Schedule, seed_everything, train_loop
 
 _ARCH_KEYS = ("n_harmonics", "omega0", "width", "depth", "activation", "softplus_beta")
-
-
-class HarmonicEmbedding(nn.Module):
-    """(M, 3) -> (M, 3 + 6 n): the input, then sin and cos at frequencies w0 * 2^k, k < n."""
-
-    def __init__(self, n_harmonics: int, omega0: float):
-        super().__init__()
-        self.register_buffer("freqs", omega0 * 2.0 ** torch.arange(n_harmonics, dtype=torch.float32), persistent=False)
-
-    @property
-    def out_dim(self) -> int:
-        return 3 + 6 * int(self.freqs.numel())
-
-    def forward(self, x: torch.Tensor) -> torch.Tensor:
-        xf = (x[:, :, None] * self.freqs).reshape(x.shape[0], 3 * self.freqs.numel())
-        return torch.cat([x, xf.sin(), xf.cos()], dim=1)
 
 
 class SDFNet(nn.Module):
@@ -62,8 +47,8 @@ class SDFNet(nn.Module):
             raise InputError(f"model.activation '{activation}': unknown (softplus | relu)")
         if width < 1 or depth < 1 or n_harmonics < 0:
             raise InputError(f"model width={width} depth={depth} n_harmonics={n_harmonics}: width, depth >= 1, n_harmonics >= 0")
-        self.embed = HarmonicEmbedding(n_harmonics, omega0)
-        dims = [self.embed.out_dim] + [width] * depth
+        self.embed = FourierFeatures(n_harmonics, omega0)
+        dims = [self.embed.out_dim(3)] + [width] * depth
         self.hidden = nn.ModuleList(nn.Linear(a, b) for a, b in zip(dims[:-1], dims[1:]))
         self.out = nn.Linear(width, 1)
         self.act = nn.Softplus(beta=softplus_beta) if activation == "softplus" else nn.ReLU()
@@ -110,7 +95,7 @@ class NeuralSDF(NetSDFFamily):
     family = "neural_sdf"
     sample_kind = "sdf"
 
-    def __init__(self, cfg: Mapping[str, Any], domain: float = 0.6):
+    def __init__(self, cfg: Mapping[str, Any], domain: float = BOX_HALF):
         super().__init__(cfg, domain)
         self.net = self._new_net()
 

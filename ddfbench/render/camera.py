@@ -12,9 +12,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-
-def _unit(v: np.ndarray) -> np.ndarray:
-    return v / np.linalg.norm(v)
+from ddfbench.geometry import camera_basis, pinhole_rays, unit
 
 
 @dataclass(frozen=True, eq=False)
@@ -30,32 +28,16 @@ class Camera:
 
     def basis(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Unit forward, right and up vectors (right-handed: right = forward × up)."""
-        forward = _unit(np.asarray(self.look_at, float) - np.asarray(self.position, float))
-        up = np.asarray(self.up, float)
-        if abs(float(forward @ _unit(up))) > 0.999:  # looking along up: any perpendicular will do
-            up = np.array([1.0, 0.0, 0.0]) if abs(forward[0]) < 0.9 else np.array([0.0, 0.0, 1.0])
-        right = _unit(np.cross(forward, up))
-        return forward, right, np.cross(right, forward)
+        return camera_basis(self.position, self.look_at, self.up)
 
     def rays(self, jitter: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-        """Rays of every pixel, S samples each.
+        """Rays of every pixel, S samples each (geometry.pinhole_rays in float32).
 
         jitter: (S, height, width, 2) offsets in pixels from the centre, or None for one centred sample.
         Returns origins and unit directions, both (S·height·width, 3) float32, ordered sample, row, column.
         """
-        if jitter is None:
-            jitter = np.zeros((1, self.height, self.width, 2))
-        forward, right, up = self.basis()
-        half_h = math.tan(math.radians(self.fov_deg) / 2)
-        half_w = half_h * self.width / self.height
-        cols = (np.arange(self.width) + 0.5)[None, None, :] + jitter[..., 0]
-        rows = (np.arange(self.height) + 0.5)[None, :, None] + jitter[..., 1]
-        x = (2 * cols / self.width - 1) * half_w
-        y = (1 - 2 * rows / self.height) * half_h
-        d = forward + x[..., None] * right + y[..., None] * up
-        d = (d / np.linalg.norm(d, axis=-1, keepdims=True)).reshape(-1, 3).astype(np.float32)
-        o = np.broadcast_to(np.asarray(self.position, np.float32), d.shape).copy()
-        return o, d
+        o, d = pinhole_rays(self.position, self.look_at, self.up, self.fov_deg, self.width, self.height, jitter)
+        return o.astype(np.float32), d.astype(np.float32)
 
 
 def orbit_cameras(n: int, radius: float, elevation_deg: float, azimuth_deg: float, fov_deg: float,
@@ -63,9 +45,9 @@ def orbit_cameras(n: int, radius: float, elevation_deg: float, azimuth_deg: floa
                   up: np.ndarray = np.array([0.0, 1.0, 0.0])) -> tuple[Camera, ...]:
     """n cameras on a circle of `radius` around look_at, evenly spaced in azimuth from azimuth_deg,
     raised elevation_deg above the plane normal to `up` (azimuth 0 looks from +z when up is +y)."""
-    up = _unit(np.asarray(up, float))
+    up = unit(np.asarray(up, float))
     ref = np.array([0.0, 0.0, 1.0]) if abs(up[2]) < 0.9 else np.array([1.0, 0.0, 0.0])
-    e2 = _unit(ref - (ref @ up) * up)
+    e2 = unit(ref - (ref @ up) * up)
     e1 = np.cross(up, e2)
     el = math.radians(elevation_deg)
     cams = []

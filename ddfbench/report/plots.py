@@ -224,12 +224,13 @@ def plot_pareto(records: list[dict[str, Any]], out_dir: str) -> list[str]:
 
 
 def sampling_lines(records: list[dict[str, Any]]) -> dict[tuple[str, str], list[tuple[float, float, float]]]:
-    """Per (model, strategy) of the ok learned runs: [(n labels, mean chamfer L2, std)] by increasing n."""
+    """Per (model, strategy) of the ok runs that trained on samples (their record counts them; a family
+    that needs none, such as mesh or grid_sdf, records no count): [(n labels, mean chamfer L2, std)] by n."""
     groups: dict[tuple[str, str, float], list[float]] = defaultdict(list)
     for r in _ok(records):
         s = r.get("sampling") or {}
         n = _num(s.get("n_samples"))
-        if math.isfinite(n) and n > 0 and r.get("family") not in ("mesh", "grid_sdf"):
+        if math.isfinite(n) and n > 0:
             groups[(str(r.get("model")), str(s.get("strategy")), n)].append(_chamfer(r))
     lines: dict[tuple[str, str], list[tuple[float, float, float]]] = defaultdict(list)
     for (model, strategy, n), vals in groups.items():

@@ -22,7 +22,7 @@ from typing import Any
 
 from omegaconf import DictConfig, OmegaConf, open_dict
 
-from ddfbench import CONF_DIR, runs
+from ddfbench import CONF_DIR, plugins, runs
 from ddfbench.errors import InputError
 
 LAUNCHER_PREFIXES = ("hydra/launcher", "hydra.launcher")  # cannot change a run; its plugin may be absent here
@@ -114,7 +114,7 @@ def expected_grid(records_dir: str, overrides: list[str]) -> tuple[list[Job], st
                 HydraConfig.instance().set_config(cfg)  # as the job itself sees it
                 with open_dict(cfg):
                     del cfg["hydra"]
-                key = runs.config_key(OmegaConf.to_container(cfg, resolve=True))  # type: ignore[arg-type]
+                key = runs.config_key(plugins.job_config(OmegaConf.to_container(cfg, resolve=True)))  # type: ignore[arg-type]
                 jobs.append(Job([o for o in job_overrides if o.split("=", 1)[0] in swept], key))
     return jobs, source
 

@@ -20,9 +20,9 @@ from typing import Any, Mapping
 import numpy as np
 
 from ddfbench.errors import InputError
+from ddfbench.geometry import pinhole_rays, ray_box
 from ddfbench.oracle import Oracle
 from ddfbench.sampling import params
-from ddfbench.sampling.box import box_interval
 from ddfbench.sampling.collect import Collector, chunks
 from ddfbench.sampling.steps import STEP_RULES, marching_distances
 from ddfbench.samples import Samples
@@ -54,17 +54,9 @@ def camera_centers(n_azimuth: int, n_polar: int, radius: float) -> np.ndarray:
 
 
 def pixel_rays(centers: np.ndarray, resolution: int, fov_deg: float) -> tuple[np.ndarray, np.ndarray]:
-    """Origins and unit directions (C * resolution^2, 3) float64 of cameras looking at the origin."""
-    fwd = -centers / np.linalg.norm(centers, axis=1, keepdims=True)
-    up0 = np.where(np.abs(fwd[:, 2:]) > 0.999, [[1.0, 0.0, 0.0]], [[0.0, 0.0, 1.0]])
-    right = np.cross(fwd, up0)
-    right /= np.linalg.norm(right, axis=1, keepdims=True)
-    up = np.cross(right, fwd)
-    s = (2 * (np.arange(resolution) + 0.5) / resolution - 1) * np.tan(np.radians(fov_deg) / 2)
-    sx, sy = [g.ravel() for g in np.meshgrid(s, -s, indexing="xy")]  # (res^2,) row-major image
-    d = fwd[:, None] + sx[None, :, None] * right[:, None] + sy[None, :, None] * up[:, None]
-    d = (d / np.linalg.norm(d, axis=-1, keepdims=True)).reshape(-1, 3)
-    return np.repeat(centers, resolution * resolution, axis=0), d
+    """Origins and unit directions (C * resolution^2, 3) float64 of cameras looking at the origin, z up."""
+    rays = [pinhole_rays(c, np.zeros(3), (0.0, 0.0, 1.0), fov_deg, resolution, resolution) for c in centers]
+    return np.concatenate([o for o, _ in rays]), np.concatenate([d for _, d in rays])
 
 
 def sample(shape: Shape, oracle: Oracle, cfg: Mapping[str, Any], kind: str,
@@ -77,7 +69,7 @@ def sample(shape: Shape, oracle: Oracle, cfg: Mapping[str, Any], kind: str,
         c = centers[np.argmax(inside)].round(3).tolist()
         raise InputError(f"sampling.radius={p['radius']}: camera at {c} is inside shape {shape.name}; use a larger radius")
     origins, dirs = pixel_rays(centers, p["resolution"], p["fov_deg"])
-    t_in, t_out = box_interval(origins, dirs, -p["box"], p["box"])
+    t_in, t_out = ray_box(origins, dirs, p["box"])
     start = np.maximum(t_in, 0.0)
     in_box = t_out > start
     rejected = {"outside_box": int((~in_box).sum())}

@@ -38,9 +38,9 @@ from typing import Any, Mapping
 
 import numpy as np
 
+from ddfbench.geometry import ray_box
 from ddfbench.oracle import Oracle
 from ddfbench.sampling import params
-from ddfbench.sampling.box import box_interval
 from ddfbench.sampling.collect import Collector, chunks
 from ddfbench.sampling.directions import DIRECTION_RULES, random_perpendicular
 from ddfbench.sampling.steps import STEP_RULES, marching_distances
@@ -114,7 +114,7 @@ def _marching_rays(pts, normals, p, oracle, rng, out: Collector, rejected, done:
     t_esc = np.full(len(base), np.inf)
     t_esc[reenters] = oracle.hit_distance(origin[reenters], theta[reenters]).astype(np.float64) + OFFSET
 
-    t_enter, t_exit = box_interval(base, theta, -p["box"], p["box"])
+    t_enter, t_exit = ray_box(base, theta, p["box"])
     t = marching_distances(p["steps"], s_p, p["t_min"], t_exit, rng)  # (R, s_p)
     grazing = t * cos_n[:, None] < TOL
     occluded = t >= t_esc[:, None] - TOL

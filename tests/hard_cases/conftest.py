@@ -4,16 +4,16 @@ import numpy as np
 import pytest
 import torch
 
-from ddfbench.hard_shapes import HARD
+from ddfbench import plugins
 from ddfbench.models import available_families
-from ddfbench.shapes import Shape, load_shape
+from ddfbench.shapes import HARD_CASES, Shape, load_shape
 
 torch.set_num_threads(1)
 
 
 def hard_shape(name: str, **params) -> Shape:
     """A `hard/...` catalog shape, validated and normalized exactly as shapes.load_shape does for any mesh."""
-    assert name in HARD, name
+    assert name in HARD_CASES, name
     return load_shape({"name": name, "params": params})
 
 
@@ -88,7 +88,8 @@ def assert_well_formed(t, hit, normal):
 
 
 def compose(*overrides: str, out_dir) -> dict:
-    """The resolved run config (plain dict) for CLI-style overrides, as `python -m ddfbench` would build it."""
+    """The resolved run config (plain dict) for CLI-style overrides, as `python -m ddfbench` would build it
+    (plugins.job_config: the plugins' experiments parts dropped, as the runner does first)."""
     import os
 
     from hydra import compose as hydra_compose, initialize_config_dir
@@ -98,4 +99,4 @@ def compose(*overrides: str, out_dir) -> dict:
     with initialize_config_dir(config_dir=os.path.abspath(conf), version_base="1.3"):
         cfg = hydra_compose("config", overrides=["scene=none", "eval=smoke", "threads=1", f"out_dir={out_dir}",
                                                  *overrides])
-    return OmegaConf.to_container(cfg, resolve=True)
+    return plugins.job_config(OmegaConf.to_container(cfg, resolve=True))

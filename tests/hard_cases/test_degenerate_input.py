@@ -12,7 +12,7 @@ import pytest
 import trimesh
 
 from ddfbench.errors import InputError
-from ddfbench.hard_shapes import dirty_sphere
+from ddfbench.catalog import dirty_sphere
 from ddfbench.metrics import sample_surface
 from ddfbench.oracle import Oracle
 from tests.hard_cases.conftest import assert_well_formed, hard_shape, has_warp, unit
@@ -41,18 +41,16 @@ def test_unreferenced_vertices_removed_and_do_not_move_the_box():
 
 
 def test_zero_area_faces_removed_and_reported():
-    """BUG (ddfbench/shapes.py, validate): the zero-area threshold area2 <= (1e-12*extent)^2 only
-    catches exactly repeated indices; a face on three collinear vertices has twice-area ~1e-17
-    after float64 rounding and survives, leaving a sliver that makes a closed sphere non-watertight
-    and whose face normal trimesh sets to zero (Oracle.first_hit returns it for a ray hitting the sliver)."""
+    """validate removes zero-area faces, both those repeating a vertex index and those on three
+    collinear vertices (twice-area ~1e-17 after float64 rounding), says how many, and the sphere is
+    watertight again (a sliver left in would open it and give a zero face normal to a ray hitting it)."""
     shape = hard_shape("hard/dirty_sphere", **{**DEFECTS, "flipped": 0})
     assert warning_with(shape, "zero-area") == "removed 3 zero-area faces"
     assert len(shape.mesh.faces) == 320 and shape.watertight
 
 
 def test_flipped_faces_reported():
-    """BUG (ddfbench/shapes.py, validate): faces wound against their neighbours pass silently;
-    the issue asks for a warning (and a consistent winding for anything that reads face normals)."""
+    """validate re-winds faces wound against their neighbours and its warning says how many (5)."""
     shape = hard_shape("hard/dirty_sphere", **{**DEFECTS, "zero_area": 0, "duplicate": 0, "unreferenced": 0})
     text = " ".join(shape.warnings)
     assert ("wound" in text or "winding" in text or "flipped" in text) and "5" in text, shape.warnings

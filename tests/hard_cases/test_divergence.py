@@ -38,6 +38,7 @@ def test_divergent_fit_gives_a_failed_record_with_the_reason(family, tmp_path):
     assert os.path.exists(os.path.join(tmp_path, rec["experiment"], rec["key"], "record.json"))
 
 
+@pytest.mark.slow
 def test_sweep_goes_on_after_a_divergent_job(tmp_path):
     args = [sys.executable, "-m", "ddfbench", "-m", "model=gan_sdf", *SMALL, "train.max_steps=3",
             "threads=1", "model.lr=1e30,1e-4", f"out_dir={tmp_path}"]

@@ -69,10 +69,8 @@ EMPTY_CLOUD_METRICS = {
 
 @pytest.mark.parametrize("name", list(EMPTY_CLOUD_METRICS))
 def test_empty_point_cloud_gets_the_penalty(gt, name):
-    """BUG (ddfbench/metrics.py: nearest_distance and every cloud metric built on it): an empty (0, 3)
-    cloud gives inf distances (cKDTree on no points) and NaN means (mean of nothing), with a
-    RuntimeWarning, instead of the penalty. Fix: in chamfer_distance, chamfer_l1, precision_recall
-    (f_score) and cloud_metrics, return the penalty_metrics value when either cloud has no points."""
+    """Every cloud metric of an empty (0, 3) cloud is its finite penalty (penalty_metrics), not inf or
+    NaN: chamfer distances as if every point were the box diagonal D away, f-score 0."""
     a = metrics.sample_surface(gt, 500, 0)[0]
     value = EMPTY_CLOUD_METRICS[name](a, np.zeros((0, 3)))
     expected = {"chamfer_distance": 2 * D**2, "chamfer_l1": D, "f_score": 0.0}.get(name, 2 * D**2)

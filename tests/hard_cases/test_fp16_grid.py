@@ -46,10 +46,9 @@ def lookups_are_finite(rep):
 
 
 def test_values_beyond_the_range_are_clamped(huge_grid):
-    """BUG (ddfbench/models/grid_sdf.py, GridSDF._set_grid): np.ascontiguousarray(grid, np.float16) turns
-    every |value| > 65504 into +-inf (RuntimeWarning: overflow), and trilinear lookups between inf nodes
-    give inf and NaN (inf - inf). Fix: cast through float32 and, for float16, np.clip(grid, -65504, 65504)
-    before the cast; load() goes through _set_grid, so artifacts holding inf are clamped too."""
+    """A float16 grid holds every value finite: |values| beyond 65504 are stored as +-65504 (a plain
+    cast would store +-inf, and trilinear lookups between inf nodes would give NaN), the rest as the
+    float16 of the exact value. Loading goes through the same clamp, so an artifact holding inf is read finite."""
     rep, exact = huge_grid
     grid = np.asarray(rep.grid)
     assert grid.dtype == np.float16 and np.isfinite(grid).all()

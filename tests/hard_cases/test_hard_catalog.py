@@ -5,14 +5,14 @@ import pytest
 
 from ddfbench.errors import InputError
 from ddfbench.extract import grid_axis
-from ddfbench.hard_shapes import HARD
+from ddfbench.shapes import HARD_CASES, SHAPE_BUILDERS
 from ddfbench.shapes import load_shape
 from tests.hard_cases.conftest import hard_shape
 
 SMALL = {"hard/torus_grid": {"segments": 40}, "hard/moved": {"base": "cube", "offset": 10.0}}
 
 
-@pytest.mark.parametrize("name", sorted(HARD))
+@pytest.mark.parametrize("name", HARD_CASES)
 def test_every_hard_shape_loads(name):
     shape = hard_shape(name, **SMALL.get(name, {}))
     assert np.ptp(shape.mesh.vertices, axis=0).max() == pytest.approx(1.0)
@@ -36,10 +36,10 @@ def test_plate_pair_gap():
                                          ("hard/moved", {"scale": 0.0})])
 def test_bad_parameters_are_input_errors(name, params):
     with pytest.raises(InputError, match=name):
-        HARD[name](**params)
+        SHAPE_BUILDERS[name](**params)
 
 
 def test_load_shape_serves_hard_names():
-    """load_shape builds names starting with "hard/" from ddfbench.hard_shapes.HARD, validated like any mesh."""
+    """load_shape builds names starting with "hard/" from ddfbench.shapes.SHAPE_BUILDERS, validated like any mesh."""
     shape = load_shape({"name": "hard/plate_pair", "params": {"gap": 1e-3}})
     assert np.array_equal(shape.mesh.vertices, hard_shape("hard/plate_pair", gap=1e-3).mesh.vertices)

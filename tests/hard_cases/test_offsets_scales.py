@@ -65,8 +65,7 @@ def test_normalization_undoes_offset_and_scale(cow, reconstruction, reference_me
 
 @pytest.mark.parametrize("offset", [1e10, 1e13])
 def test_offset_beyond_float64_precision_is_a_clear_error(offset):
-    """At 1e13 the float64 spacing (2e-3) exceeds the 1e-3 extent and every face collapses.
-    BUG (ddfbench/shapes.py, validate): the zero-area check runs before the precision check, so the
-    user reads "every face has zero area" instead of the cause (extent too small for its offset)."""
+    """At 1e13 the float64 spacing (2e-3) exceeds the 1e-3 extent and every face collapses: the error
+    names the cause (precision: extent too small for its offset), not its symptom (zero-area faces)."""
     with pytest.raises(InputError, match="precision"):
         hard_shape("hard/moved", base="cow", offset=offset, scale=1e-3)

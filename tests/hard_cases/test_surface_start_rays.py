@@ -22,7 +22,7 @@ from ddfbench.oracle import Oracle
 from ddfbench.render.counting import CountedTracer
 from ddfbench.representation import Budget, FitData, RayStatus
 from ddfbench.trace import TraceOptions, sphere_trace
-from ddfbench.trace_bench import oracle_sdf_samples
+from ddfbench.sampling.oracle_sdf import oracle_sdf_samples
 from tests.hard_cases.conftest import assert_well_formed, backend_params, compose, has_family, hard_shape, unit
 
 RAY_OFFSET = 1e-3  # conf/scene/*.yaml ray_offset: checked below against the scene configs
@@ -33,7 +33,7 @@ QUICK = {
     "grid_sdf": {"resolution": 48, "build": "levelset"},
     "neural_sdf": {"width": 64, "depth": 3, "batch": 2048, "lr": 3e-3},
     "gan_sdf": {"batch": 128, "w_anchor": 1.0, "trace": {"max_steps": 64}},  # ~2 MFLOP per field evaluation
-    "ddf": {"width": 128, "depth": 3, "pos_freqs": 4, "dir_freqs": 2, "batch_size": 2048, "lr": 3e-3,
+    "ddf": {"width": 128, "depth": 3, "pos_freqs": 4, "dir_freqs": 2, "batch": 2048, "lr": 3e-3,
             "udf_directions": 8, "mesh_directions": 16},
 }
 SURFACE_SAMPLING = {"strategy": "surface", "face_mode": "total", "s_fc": 40, "s_dr": 4, "s_p": 4,
@@ -91,9 +91,9 @@ def sphere_fits(sphere):
 
 @pytest.mark.parametrize("family", FAMILIES)
 def test_offset_rays_leaving_the_surface_do_not_self_hit(sphere_fits, family):
-    """BUG (ddf, ddfbench/models/ddf.py, DDF.intersect): a few rays (3 of 1500 after a 4 s fit) leaving the
-    surface get a visible hit with a predicted distance <= 0, clamped to t = 0: the network answers for
-    the surface the query point stands on."""
+    """Shadow rays leaving a surface point (started ray_offset out along the normal) report no hit
+    nearer than ray_offset, for every family: no answer for the surface the ray leaves (the DDF once
+    gave a few such rays t = 0)."""
     rep = sphere_fits[family]
     p, n = camera_hits(rep, 1500, seed=1)
     assert len(p) > 300, f"{family}: the quick fit hit only {len(p)} of 1500 camera rays"
@@ -109,9 +109,8 @@ def test_offset_rays_leaving_the_surface_do_not_self_hit(sphere_fits, family):
 
 @pytest.mark.parametrize("backend", backend_params("open3d", "warp"))
 def test_mesh_rays_started_exactly_on_the_surface(sphere, backend):
-    """BUG (ddfbench/models/mesh.py, MeshFamily.intersect; the oracle's first_hit has no t_near): a ray
-    started exactly on a facet reports that facet at t ~ 1e-10 for about half the outward directions
-    and a start on the surface going inward stops at t ~ 0 instead of the far side."""
+    """The mesh family's rays started exactly on a facet skip that facet: going outward they miss the
+    sphere, going inward they stop at the far side within 1e-4 (not at t ~ 0 on the facet they start on)."""
     rep = load_family("mesh")({"faces": 0, "backend": backend})
     rep.fit(FitData(None, sphere.mesh, None), Budget())
     mesh = sphere.mesh

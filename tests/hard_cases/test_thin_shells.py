@@ -14,7 +14,7 @@ Run with -s to see the table; the numbers also go to the junit report (record_pr
 import numpy as np
 import pytest
 
-from ddfbench.hard_shapes import grid_step
+from ddfbench.catalog import grid_step
 from ddfbench.representation import RayStatus
 from tests.hard_cases.conftest import has_family, hard_shape
 from tests.hard_cases.test_surface_start_rays import quick_fit

@@ -76,9 +76,9 @@ def test_exit_is_hit_from_inside(cube, rays):
 
 
 def test_count_crossings_counts_each_crossing_once(cube, rays):
-    """BUG (ddfbench/oracle.py, Oracle.count_crossings): open3d's count_intersections counts every
-    triangle a ray touches, so a ray through a vertex or edge is counted 3-6 times instead of 2.
-    Parity-based callers (odd-even sample rejection) then get the wrong answer on such rays."""
+    """Oracle.count_crossings counts a ray through a vertex or an edge of the cube as 2 crossings, like
+    any other ray through it (a count per touched triangle would give 3-6), so parity-based callers
+    (odd-even sample rejection) are right on such rays."""
     o, d, _, _ = rays
     counts = Oracle(cube.mesh).count_crossings(o, d)
     wrong = counts != 2

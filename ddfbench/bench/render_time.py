@@ -1,9 +1,9 @@
 """Render-time benchmark, the DDF paper's Fig. 5 as a table and a plot: first vs later renders of
 the same scene, per representation, against the full mesh's BVH measured in the same process.
 
-    python -m ddfbench.render.bench                                  mesh LODs on the bunny, scene=depth
-    python -m ddfbench.render.bench --scene paper_fig4 --size 128 --renders 8 --plot fig5.png
-    python -m ddfbench.render.bench --model ddf=results/single/<key>/model.pt   a saved artifact of any family
+    python -m ddfbench.bench.render_time                                  mesh LODs on the bunny, scene=depth
+    python -m ddfbench.bench.render_time --scene paper_fig4 --size 128 --renders 8 --plot fig5.png
+    python -m ddfbench.bench.render_time --model ddf=results/single/<key>/model.pt   a saved artifact of any family
 
 Columns: setup_s (build or load: mesh decimation + scene, or Family.load), render_1_s (the cold
 render: lazy setup such as the BVH commit or weights to the device included), later_median_s and

@@ -1,36 +1,62 @@
-"""The `hard/...` shapes: meshes built to break things (the hard-case suite, issue 7).
+"""The built-in shapes as raw meshes: sample files and mesh builders, before validation and normalization.
 
-Each entry of HARD maps a catalog name to a builder `(**params) -> trimesh.Trimesh`
-that returns the raw mesh, before validation and normalization (so the defects it
-carries reach `shapes.validate`). Sizes are in the raw frame; every builder keeps
-the longest side at 1 unless it says otherwise, so thicknesses and gaps survive
-normalization unchanged.
+The bottom of the shape code: nothing here imports ddfbench.shapes (which validates, normalizes and
+serves these by name). A builder `(**params) -> trimesh.Trimesh` returns the raw mesh with any defect
+it is meant to carry, so the defect reaches `shapes.validate`. Sizes are in the raw frame; every
+builder keeps the longest side at 1 unless it says otherwise, so thicknesses and gaps survive
+normalization unchanged. The `hard/...` names are the hard-case suite's meshes built to break things:
 
     hard/one_triangle     a single triangle
     hard/thin_plate       a 1 x 1 box of `thickness` (0.02), or of `voxels` grid steps of a
-                          resolution^3 grid over [-domain, domain]^3
+                          resolution^3 grid over [-domain, domain]^3 (also served as `thin_plate`)
     hard/plate_pair       two thin plates `gap` apart (default 1e-3)
-    hard/open_box         the unit box with its top face removed (non-watertight)
+    open_box              the unit box with its top face removed (non-watertight)
     hard/dirty_sphere     an icosphere with injected zero-area, duplicate and flipped faces
                           and unreferenced vertices (counts are parameters)
     hard/torus_grid       a torus as a (segments x segments/2) quad grid: 1M triangles at segments=1000
-    hard/moved            a catalog shape scaled by `scale`, then translated by `offset` (float64)
+    hard/moved            (ddfbench.shapes: it builds on a loaded shape) a catalog shape scaled and moved far away
 """
 
 from __future__ import annotations
 
+import os
 from typing import Callable
 
 import numpy as np
 import trimesh
 
 from ddfbench.errors import InputError
-from ddfbench.shapes import PROCEDURAL, load_shape
+from ddfbench.geometry import BOX_HALF
+
+# name -> file below the pymeshlab sample folder
+PYMESHLAB_SAMPLES = {
+    "bunny": "bunny.obj",
+    "bunny10k": "bunny10k_textured.obj",  # non-watertight
+    "airplane": "airplane.obj",
+    "cow": "cow.obj",
+    "bone": "bone.ply",
+    "cube": "cube.obj",
+    "range_scan": "rangemaps/face000.ply",  # an open range scan
+}
 
 
-def grid_step(resolution: int, domain: float = 0.6) -> float:
+def pymeshlab_samples_dir() -> str:
+    """Folder of the sample meshes shipped inside the installed pymeshlab package."""
+    import pymeshlab
+
+    return os.path.join(os.path.dirname(pymeshlab.__file__), "tests", "sample_meshes")
+
+
+def grid_step(resolution: int, domain: float = BOX_HALF) -> float:
     """Node spacing of a resolution^3 grid over [-domain, domain]^3 (extract.grid_axis's spacing)."""
     return 2.0 * float(domain) / (int(resolution) - 1)
+
+
+def open_box() -> trimesh.Trimesh:
+    """The unit box without its top (+z) face: open, not watertight."""
+    box = trimesh.creation.box(extents=(1.0, 1.0, 1.0))
+    top = box.face_normals[:, 2] > 0.5
+    return trimesh.Trimesh(box.vertices, box.faces[~top], process=False)
 
 
 def one_triangle() -> trimesh.Trimesh:
@@ -39,7 +65,7 @@ def one_triangle() -> trimesh.Trimesh:
 
 
 def thin_plate(thickness: float | None = None, voxels: float | None = None, resolution: int = 64,
-               domain: float = 0.6) -> trimesh.Trimesh:
+               domain: float = BOX_HALF) -> trimesh.Trimesh:
     """A closed 1 x 1 x thickness box centred at the origin (thickness = voxels * grid_step if given; default 0.02)."""
     if thickness is not None and voxels is not None:
         raise InputError(f"hard/thin_plate: give thickness ({thickness}) or voxels ({voxels}), not both")
@@ -115,21 +141,18 @@ def torus_grid(segments: int = 1000, major_radius: float = 0.35, minor_radius: f
     return trimesh.Trimesh(v.reshape(-1, 3), faces, process=False)
 
 
-def moved(base: str = "cow", offset: float = 1e7, scale: float = 1.0) -> trimesh.Trimesh:
-    """Catalog shape `base` (normalized) scaled by `scale`, then translated by offset * (1, -0.7, 0.3), in float64."""
-    if not (np.isfinite(offset) and np.isfinite(scale) and scale > 0):
-        raise InputError(f"hard/moved: offset {offset!r} must be finite and scale {scale!r} finite and > 0")
-    mesh = load_shape({"name": base}).mesh
-    v = np.asarray(mesh.vertices, np.float64) * float(scale) + float(offset) * np.array([1.0, -0.7, 0.3])
-    return trimesh.Trimesh(v, np.asarray(mesh.faces), process=False)
-
-
-HARD: dict[str, Callable[..., trimesh.Trimesh]] = {
+# catalog name -> raw mesh builder; each builder is registered under exactly one name
+BUILDERS: dict[str, Callable[..., trimesh.Trimesh]] = {
+    "sphere": lambda radius=0.5, subdivisions=4: trimesh.creation.icosphere(subdivisions, radius),
+    "torus": lambda major_radius=0.35, minor_radius=0.15: trimesh.creation.torus(major_radius, minor_radius),
+    "box": lambda extents=(1.0, 0.6, 0.4): trimesh.creation.box(extents=extents),
+    "capsule": lambda height=0.5, radius=0.25: trimesh.creation.capsule(height=height, radius=radius),
+    "open_box": open_box,
     "hard/one_triangle": one_triangle,
     "hard/thin_plate": thin_plate,
     "hard/plate_pair": plate_pair,
-    "hard/open_box": PROCEDURAL["open_box"],
     "hard/dirty_sphere": dirty_sphere,
     "hard/torus_grid": torus_grid,
-    "hard/moved": moved,
 }
+# short names kept for configs written before the hard-case names (conf/shape/thin_plate.yaml)
+ALIASES = {"thin_plate": "hard/thin_plate"}

@@ -1,0 +1,87 @@
+"""Training the DDF: its labels (the samples' rays, plus exact visibility labels where their lines enter
+the box) and the fit loop (distance loss on hits, l1 or the paper's clamp; visibility cross entropy).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+from torch import nn
+
+from ddfbench.errors import InputError
+from ddfbench.models.ddf.network import DDFNet
+from ddfbench.models.ddf.rays import box_entry
+from ddfbench.representation import Budget, FitData, FitStats, Probe, Representation
+from ddfbench.train import Schedule, seed_everything, train_loop
+
+
+MAX_ENTRY_LINES = 1 << 22  # sample lines drawn (seeded) for the entry labels: 4M lines, 100 MB
+
+
+def line_entry_labels(x: np.ndarray, d: np.ndarray, line_hit: np.ndarray, half: float,
+                      rows: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Exact visibility labels where sample lines enter the box [-half, half]^3, the queries intersect
+    and to_mesh make: the samples' rows (M,) of x (N,3), unit d (N,3) and line_hit (N,) bool (whether
+    the whole line meets the surface, Samples.line_hit), moved back along -d to the box boundary.
+    Returns (entry points (M,3) float32, directions (M,3) float32, hit (M,) bool).
+    """
+    xs, ds = np.asarray(x[rows], np.float32), np.asarray(d[rows], np.float32)
+    back = box_entry(xs, -ds, half)[1]
+    return xs - back[:, None] * ds, ds, np.asarray(line_hit[rows], bool)
+
+
+def fit(rep: Representation, data: FitData, budget: Budget, probe: Probe | None = None) -> FitStats:
+    """Train rep.net (a fresh DDFNet on budget.device) on ray samples; see the module docstring."""
+    s = data.samples
+    if s is None or s.d is None or s.t is None or s.hit is None:
+        raise InputError("model ddf: needs ray samples (x, d, t, hit); the sampler gave none")
+    if len(s) == 0:
+        raise InputError("model ddf: the sample set is empty")
+    seed_everything(budget.seed)
+    rep.device = budget.device
+    rep.net = DDFNet(rep.cfg).to(rep.device)
+    dev = rep.device
+    x = torch.as_tensor(s.x, dtype=torch.float32, device=dev)
+    d = torch.as_tensor(s.d, dtype=torch.float32, device=dev)
+    hit = torch.as_tensor(s.hit, dtype=torch.bool, device=dev)
+    t = torch.where(hit, torch.as_tensor(np.nan_to_num(s.t, posinf=0.0), dtype=torch.float32, device=dev), 0.0)
+    cfg, n = rep.cfg, len(s)
+    gen = torch.Generator(device=dev).manual_seed(int(budget.seed))
+    delta = float(cfg["delta"])
+    lines = np.zeros(0, np.int64) if s.line_hit is None else \
+        np.random.default_rng(int(budget.seed)).choice(n, min(n, MAX_ENTRY_LINES), replace=False)
+    line_hit = s.hit if s.line_hit is None else s.line_hit  # no line labels: no rows either
+    xe, de, he = (torch.as_tensor(a, device=dev) for a in line_entry_labels(s.x, s.d, line_hit, rep.domain, lines))
+    n_hit_entries = int(he.sum())
+    both = 0 < n_hit_entries < len(he)  # one class alone would only bias the head: then none
+    n_entry = 2 * int(round(float(cfg["entry_share"]) * int(cfg["batch"]) / 2)) if both and cfg["visibility"] == "head" else 0
+    n_main = int(cfg["batch"]) - n_entry
+    order = torch.argsort((~he).to(torch.uint8), stable=True)  # entry hits first, then misses
+    xe, de, he = xe[order], de[order], he[order]
+
+    def step_fn(step: int) -> torch.Tensor:
+        i = torch.randint(0, n, (n_main,), device=dev, generator=gen)
+        half = n_entry // 2  # as many entry hits as entry misses
+        j = torch.cat([torch.randint(0, max(n_hit_entries, 1), (half,), device=dev, generator=gen),
+                       torch.randint(n_hit_entries, max(len(he), n_hit_entries + 1), (half,), device=dev, generator=gen)])
+        pred, logit = rep.net(torch.cat([x[i], xe[j]]), torch.cat([d[i], de[j]]))
+        pred, h = pred[:n_main], hit[i]
+        if cfg["loss"] == "clamp":  # |clamp(y, delta) - clamp(y_hat, delta)|, misses labelled delta
+            target = torch.where(h, t[i].clamp(max=delta), delta)
+            dist_loss = (pred.clamp(max=delta) - target).abs()
+            dist_loss = dist_loss.mean() if logit is None else dist_loss[h].sum() / h.sum().clamp_min(1)
+        else:
+            dist_loss = (pred - t[i]).abs()[h].sum() / h.sum().clamp_min(1)
+        if logit is None:
+            return dist_loss
+        vis = nn.functional.binary_cross_entropy_with_logits(logit, torch.cat([h, he[j]]).float())
+        return dist_loss + float(cfg["vis_weight"]) * vis
+
+    optimizer = torch.optim.Adam(rep.net.parameters(), lr=float(cfg["lr"]), weight_decay=float(cfg["weight_decay"]))
+    stats = train_loop(
+        rep.net, optimizer, step_fn, budget, Schedule.from_cfg(cfg),
+        probe_fn=(lambda: probe(rep)) if probe is not None else None,
+        grad_clip=float(cfg["grad_clip"]) or None, desc="ddf",
+    )
+    stats.extra.update(n_samples=n, hit_share=float(s.hit.mean()), n_params=rep.n_params())
+    return stats

@@ -1,0 +1,77 @@
+"""The DDF network phi(x, d) -> (distance, visibility logit) and the checked model config it is built from."""
+
+from __future__ import annotations
+
+import math
+from typing import Any, Mapping
+
+import torch
+from torch import nn
+
+from ddfbench import plugins
+from ddfbench.errors import InputError
+from ddfbench.geometry import FourierFeatures
+
+_CHOICES = {"activation": ("relu", "softplus"), "direction": ("vector", "angles"), "param": ("point", "ray"),
+            "visibility": ("head", "clamp"), "loss": ("l1", "clamp"), "storage_dtype": ("float32", "float16"),
+            "mesh_field": ("signed", "udf")}
+
+
+def checked_config(cfg: Mapping[str, Any]) -> dict[str, Any]:
+    """conf/model/ddf.yaml overlaid by cfg (strict, see ddfbench.plugins), with the values checked."""
+    out = plugins.family_config("ddf", cfg)
+    for key, allowed in _CHOICES.items():
+        if out[key] not in allowed:
+            raise InputError(f"model.{key} '{out[key]}': unknown (one of {', '.join(allowed)})")
+    for key in ("width", "depth", "batch", "udf_directions", "udf_rank", "eval_batch", "mesh_directions",
+                "mesh_keep", "mesh_rank", "mesh_coarse"):
+        if int(out[key]) < 1:
+            raise InputError(f"model.{key} {out[key]}: must be a positive integer")
+    if not 0.0 <= float(out["entry_share"]) < 1.0:
+        raise InputError(f"model.entry_share {out['entry_share']}: must be in [0, 1)")
+    for key in ("mesh_band", "mesh_lipschitz"):
+        if not float(out[key]) > 0:
+            raise InputError(f"model.{key} {out[key]}: must be > 0")
+    if out["loss"] == "clamp" or out["visibility"] == "clamp":
+        if not float(out["delta"]) > 0:
+            raise InputError(f"model.delta {out['delta']}: must be > 0 for the clamp loss")
+    if out["visibility"] == "clamp" and out["loss"] != "clamp":
+        raise InputError("model.visibility 'clamp' needs model.loss 'clamp' (misses are learned as delta)")
+    return out
+
+
+class DDFNet(nn.Module):
+    """phi(x, d) for x (N,3), unit d (N,3) -> (distance (N,), visibility logit (N,) or None)."""
+
+    def __init__(self, cfg: Mapping[str, Any]):
+        super().__init__()
+        self.param, self.direction = cfg["param"], cfg["direction"]
+        self.pos_pe, self.dir_pe = FourierFeatures(cfg["pos_freqs"], math.pi), FourierFeatures(cfg["dir_freqs"], math.pi)
+        n_pos = self.pos_pe.out_dim(4 if self.param == "ray" else 3)
+        n_dir = self.dir_pe.out_dim(3 if self.direction == "vector" else 2)
+        n_out = 2 if cfg["visibility"] == "head" else 1
+        act = {"relu": nn.ReLU, "softplus": lambda: nn.Softplus(beta=100)}[cfg["activation"]]
+        layers, n_in = [], n_pos + n_dir
+        for _ in range(int(cfg["depth"])):
+            lin = nn.Linear(n_in, int(cfg["width"]))
+            layers += [nn.utils.parametrizations.weight_norm(lin) if cfg["weight_norm"] else lin, act()]
+            if cfg["dropout"] > 0:
+                layers.append(nn.Dropout(float(cfg["dropout"])))
+            n_in = int(cfg["width"])
+        self.body = nn.Sequential(*layers)
+        self.out = nn.Linear(n_in, n_out)
+
+    def forward(self, x: torch.Tensor, d: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor | None]:
+        if self.param == "ray":
+            s0 = (x * d).sum(-1, keepdim=True)
+            pos = torch.cat([x - s0 * d, s0], -1)
+        else:
+            pos = x
+        if self.direction == "angles":
+            polar = torch.acos(d[:, 2:3].clamp(-1.0, 1.0))
+            dirs = torch.cat([polar, torch.atan2(d[:, 1:2], d[:, 0:1])], -1)
+        else:
+            dirs = d
+        y = self.out(self.body(torch.cat([self.pos_pe(pos), self.dir_pe(dirs)], -1)))
+        dist = y[:, 0] - s0[:, 0] if self.param == "ray" else y[:, 0]
+        return dist, (y[:, 1] if y.shape[1] > 1 else None)

@@ -1,0 +1,123 @@
+"""A family or a sampler is a plugin: one module and one YAML, nothing else touched.
+
+The slow test copies the package and the config tree, adds a copy of grid_sdf under a new name and a
+copy of the random sampler under a new name (one .py and one .yaml each), and shows that both join
+every experiment their YAML names, run in the smoke sweep and reach the report table.
+"""
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+
+import pandas as pd
+import pytest
+
+from ddfbench import CONF_DIR, plugins
+from ddfbench.errors import InputError
+from ddfbench.models import load_family
+
+PACKAGE_DIR = os.path.dirname(os.path.dirname(os.path.abspath(plugins.__file__)))
+
+
+def test_family_config_is_the_yaml_overlaid_and_rejects_unknown_keys():
+    mesh = load_family("mesh")({"faces": 10})
+    expected = {k: v for k, v in plugins.defaults("model", "mesh").items() if k != "family"}
+    assert mesh.cfg == {**expected, "faces": 10}  # the YAML's keys, cfg's values where it gives them
+    with pytest.raises(InputError) as err:
+        load_family("ddf")({"widht": 64})
+    line = str(err.value)
+    assert "\n" not in line and line.startswith("model.widht: unknown key (known: ") and "width" in line
+
+
+def test_family_config_rejects_a_value_of_the_wrong_type():
+    with pytest.raises(InputError, match=r"model.resolution='big': must be a number"):
+        load_family("grid_sdf")({"resolution": "big"})
+    with pytest.raises(InputError, match=r"model.trace.epss: unknown key"):
+        load_family("grid_sdf")({"trace": {"epss": 1e-3}})
+
+
+def test_a_preset_takes_its_missing_keys_from_its_family_yaml():
+    paper = plugins.plugin_yaml("model", "ddf_paper")
+    assert "entry_share" not in paper
+    rep = load_family("ddf")({k: v for k, v in paper.items() if k != "experiments"})
+    assert rep.cfg["entry_share"] == plugins.defaults("model", "ddf")["entry_share"]
+    assert rep.cfg["width"] == paper["width"] != plugins.defaults("model", "ddf")["width"]
+
+
+def test_misspelt_override_ends_the_run_with_one_line(tmp_path):
+    run = subprocess.run([sys.executable, "-m", "ddfbench", "model=ddf", "model.widht=64", f"out_dir={tmp_path}"],
+                         capture_output=True, text=True, timeout=120, cwd=str(tmp_path),
+                         env=dict(os.environ, PYTHONPATH=PACKAGE_DIR))
+    assert run.returncode != 0
+    lines = run.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("ddfbench: model.widht: unknown key (known: ")
+    assert "width" in lines[0] and "batch" in lines[0]
+    assert not os.path.exists(tmp_path / "single")  # nothing ran
+
+
+def _copy_tree(root):
+    """The package and conf/ copied under root, with grid_copy (a family) and random_copy (a sampler) added."""
+    ignore = shutil.ignore_patterns("__pycache__")
+    shutil.copytree(os.path.join(PACKAGE_DIR, "ddfbench"), root / "ddfbench", ignore=ignore)
+    shutil.copytree(CONF_DIR, root / "conf", ignore=ignore)
+    pkg, conf = root / "ddfbench", root / "conf"
+    family = (pkg / "models" / "grid_sdf.py").read_text()
+    (pkg / "models" / "grid_copy.py").write_text(family.replace('family = "grid_sdf"', 'family = "grid_copy"'))
+    (conf / "model" / "grid_copy.yaml").write_text(
+        (conf / "model" / "grid_sdf.yaml").read_text().replace("family: grid_sdf", "family: grid_copy"))
+    shutil.copy(pkg / "sampling" / "random.py", pkg / "sampling" / "random_copy.py")
+    (conf / "sampling" / "random_copy.yaml").write_text(
+        (conf / "sampling" / "random.yaml").read_text().replace("strategy: random", "strategy: random_copy"))
+
+
+@pytest.mark.slow
+def test_a_copied_family_and_sampler_join_the_experiments_and_the_report(tmp_path):
+    root = tmp_path / "tree"
+    _copy_tree(root)
+    env = dict(os.environ, PYTHONPATH=str(root), PYTHONUNBUFFERED="1")
+    probe = ("import json; from ddfbench import plugins; from ddfbench.report.status import expected_grid as g;"
+             "e = ['default', 'representations', 'render_time', 'pareto', 'storage', 'smoke'];"
+             "print(json.dumps({'models': {x: plugins.members('model', x) for x in e},"
+             " 'samplers': plugins.members('sampling', 'sampling'),"
+             " 'smoke': [j.swept for j in g('/x/smoke', ['+experiment=smoke'])[0]]}))")
+    out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, env=env, cwd=str(root),
+                         timeout=300)
+    assert out.returncode == 0, out.stderr[-2000:]
+    found = json.loads(out.stdout)
+    assert all("grid_copy" in models for models in found["models"].values()), found["models"]
+    assert "random_copy" in found["samplers"]
+    smoke = {tuple(sorted(s)) for s in found["smoke"]}
+    assert ("model=grid_copy", "sampling=random_copy") in smoke and ("model=ddf", "sampling=random_copy") in smoke
+
+    # Two runs of the smoke sweep: the copied family (it needs no samples) and the DDF on the copied sampler.
+    run = subprocess.run([sys.executable, "-m", "ddfbench", "+experiment=smoke", "hydra.sweeper.params=null",
+                          "model=grid_copy,ddf", "sampling=random_copy",
+                          f"out_dir={tmp_path / 'out'}", "quiet=true", "threads=1"],
+                         capture_output=True, text=True, env=env, cwd=str(root), timeout=600)
+    assert run.returncode == 0, run.stderr[-3000:]
+    report = subprocess.run([sys.executable, "-m", "ddfbench.report", str(tmp_path / "out" / "smoke"),
+                             "--out", str(tmp_path / "report")], capture_output=True, text=True, env=env,
+                            cwd=str(root), timeout=300)
+    assert report.returncode == 0, report.stderr[-3000:]
+    table = pd.read_csv(tmp_path / "report" / "table.csv")
+    rows = table[table["model"] != "noise floor"]
+    assert set(rows["model"]) == {"grid_copy", "ddf"} and (rows["n_failed"].fillna(0) == 0).all()
+    ddf_row = rows[rows["model"] == "ddf"].iloc[0]
+    assert ddf_row["n_samples_mean"] > 0 and ddf_row["sampling_s_mean"] > 0  # the copied sampler made its labels
+    grid_row = rows[rows["model"] == "grid_copy"].iloc[0]
+    assert pd.isna(grid_row["n_samples_mean"]) and pd.isna(grid_row["sampling_s_mean"])  # a grid needs none
+
+
+def test_command_line_overrides_are_checked_against_the_named_plugin():
+    from ddfbench.cli import checked_overrides
+
+    # a key the preset leaves to its family's YAML is added (Hydra would refuse `model.entry_share=` on it)
+    assert checked_overrides(["model=ddf_paper", "model.entry_share=0.3", "seed=1"]) == \
+        ["model=ddf_paper", "++model.entry_share=0.3", "seed=1"]
+    assert checked_overrides(["model=ddf", "model.width=64"]) == ["model=ddf", "model.width=64"]
+    with pytest.raises(InputError, match=r"^sampling.n_sampels: unknown key \(known: .*n_samples"):
+        checked_overrides(["sampling=random", "sampling.n_sampels=5"])
+    with pytest.raises(InputError, match=r"^model.faces: unknown key"):
+        checked_overrides(["model=ddf", "model.faces=5"])  # a mesh key, not a DDF's
