@@ -11,7 +11,7 @@ What one MLflow run holds (experiment = the ddfbench experiment name):
   tags       ddfbench.key, family, model, shape, strategy, seed, git_sha, status, error
   metrics    every number in the record's `metrics` and `cost` (`chamfer_l2`, `storage_bytes`, `fit_s`)
              and its fit summary (`fit.steps`, `fit.seconds`), flattened with dots
-  history    probe_<metric> at each accuracy probe, step = fit time in milliseconds
+  history    probe_<metric> at each accuracy probe: step = probe index, timestamp = start + fit time
   artifacts  record.json, the renders' PNGs (renders/), reconstruction.ply
 """
 
@@ -89,14 +89,18 @@ def record_tags(record: Mapping[str, Any]) -> dict[str, str]:
     return {k: str(v)[:5000] for k, v in tags.items() if v is not None}
 
 
-def _probe_history(record: Mapping[str, Any]) -> list[tuple[str, float, int]]:
-    """(metric name, value, step = fit time in ms) of every accuracy probe of the fit."""
+def _probe_history(record: Mapping[str, Any]) -> list[tuple[str, float, int, int]]:
+    """(metric name, value, step = probe index, fit time in ms) of every accuracy probe of the fit.
+
+    The probe index keeps every point (MLflow merges points of equal step, time and value); the fit
+    time goes into the point's timestamp, so MLflow's "relative time" axis is the fit time.
+    """
     out = []
-    for probe in (record.get("fit") or {}).get("probes", []):
-        step = int(round(1000 * float(probe.get("seconds", 0.0))))
+    for index, probe in enumerate((record.get("fit") or {}).get("probes", [])):
+        fit_ms = int(round(1000 * float(probe.get("seconds", 0.0))))
         for key, value in probe.items():
             if key not in ("step", "seconds") and (num := _number(value)) is not None:
-                out.append((_name(f"probe_{key}"), num, step))
+                out.append((_name(f"probe_{key}"), num, index, fit_ms))
     return out
 
 
@@ -153,7 +157,7 @@ def log_record(uri: str, record: Mapping[str, Any], run_dir: str) -> str | None:
         client.log_batch(run_id, params=params[i:i + _BATCH])
     now = run.info.start_time
     metrics = [Metric(k, v, now, 0) for k, v in record_metrics(record).items()]
-    metrics += [Metric(k, v, now + step, step) for k, v, step in _probe_history(record)]
+    metrics += [Metric(k, v, now + fit_ms, index) for k, v, index, fit_ms in _probe_history(record)]
     for i in range(0, len(metrics), 1000):
         client.log_batch(run_id, metrics=metrics[i:i + 1000])
     _artifacts(client, run_id, run_dir, record)
