@@ -12,7 +12,7 @@ seeds (or over paired seeds) with n, the experiment and rows it comes from, and 
   not testable     ddfbench cannot test it here (the reason is given)
   no records       the experiment has not been run into this folder
 
-Papers: DDF = /work/shared/papers/000_* (Behera & Mishra), thesis = 001_* (Zeng 2018).
+Papers: DDF = ../shared/papers/000_* (Behera & Mishra), thesis = 001_* (Zeng 2018).
 """
 
 from __future__ import annotations
