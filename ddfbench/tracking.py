@@ -17,6 +17,7 @@ What one MLflow run holds (experiment = the ddfbench experiment name):
 
 from __future__ import annotations
 
+import datetime
 import logging
 import math
 import os
@@ -104,6 +105,14 @@ def _probe_history(record: Mapping[str, Any]) -> list[tuple[str, float, int, int
     return out
 
 
+def _epoch_ms(stamp: Any) -> int | None:
+    """An ISO-8601 time of the record (started, finished) in ms since the epoch, or None."""
+    try:
+        return int(datetime.datetime.fromisoformat(str(stamp)).timestamp() * 1000)
+    except ValueError:
+        return None
+
+
 def _logged_run(client: Any, experiment_id: str, record: Mapping[str, Any]) -> bool:
     """True where an MLflow run with this record's key and status is already in the experiment."""
     found = client.search_runs([experiment_id], filter_string=f"tags.`{KEY_TAG}` = '{record.get('key')}'",
@@ -150,7 +159,7 @@ def log_record(uri: str, record: Mapping[str, Any], run_dir: str) -> str | None:
     experiment_id = _experiment_id(client, uri, str(record.get("experiment", "single")))
     if _logged_run(client, experiment_id, record):
         return None
-    run = client.create_run(experiment_id, tags=record_tags(record))
+    run = client.create_run(experiment_id, start_time=_epoch_ms(record.get("started")), tags=record_tags(record))
     run_id = run.info.run_id
     params = [Param(_name(k), str(v)[:6000]) for k, v in flatten(record.get("config", {}))]
     for i in range(0, len(params), _BATCH):
@@ -161,7 +170,8 @@ def log_record(uri: str, record: Mapping[str, Any], run_dir: str) -> str | None:
     for i in range(0, len(metrics), 1000):
         client.log_batch(run_id, metrics=metrics[i:i + 1000])
     _artifacts(client, run_id, run_dir, record)
-    client.set_terminated(run_id, status="FINISHED" if record.get("status") == "ok" else "FAILED")
+    client.set_terminated(run_id, status="FINISHED" if record.get("status") == "ok" else "FAILED",
+                          end_time=_epoch_ms(record.get("finished")))
     return run_id
 
 

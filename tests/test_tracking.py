@@ -1,5 +1,6 @@
 """MLflow tracking against a real SQLite store in a temporary folder (no mocks)."""
 
+import datetime
 import logging
 import os
 import socket
@@ -39,6 +40,8 @@ def test_mesh_run_is_logged_with_tags_metrics_and_artifacts(tmp_path):
     assert run.data.metrics["chamfer_l2"] == pytest.approx(rec["metrics"]["chamfer_l2"])
     assert run.data.metrics["storage_bytes"] == rec["cost"]["storage_bytes"]
     assert run.data.params["model.family"] == "mesh"
+    started, finished = (datetime.datetime.fromisoformat(rec[k]).timestamp() * 1000 for k in ("started", "finished"))
+    assert (run.info.start_time, run.info.end_time) == (started, finished)  # the run's own times, not logging time
     assert run.info.artifact_uri.startswith(f"file://{tmp_path}/mlartifacts/")  # beside the store, not ./mlruns
     top = {a.path for a in client.list_artifacts(run.info.run_id)}
     assert {"record.json", "renders"} <= top
