@@ -3,7 +3,7 @@
 `train.budget` (conf/train/default.yaml) picks one:
   steps       train.max_steps optimizer steps; no time limit. Repeatable: the same steps on any machine.
   epochs      train.max_epochs passes over the labels: ceil(epochs x n_labels / batch) steps, batch from
-              the model config (`batch_size` or `batch`); no time limit.
+              the model config (`batch`); no time limit.
   wall-clock  train.max_seconds of training (or max_steps, whichever ends first): "what do I get in N
               seconds" runs. The steps taken vary with the machine and its load, so such records are
               labelled "wall-clock" in the record (fit.budget) and in every table.
@@ -19,7 +19,6 @@ from typing import Any, Mapping
 from ddfbench.errors import InputError
 
 KINDS = ("steps", "epochs", "wall-clock")
-_BATCH_KEYS = ("batch_size", "batch")
 
 
 @dataclass(frozen=True)
@@ -33,10 +32,7 @@ class FitLimit:
 
 def batch_size(model_cfg: Mapping[str, Any]) -> int | None:
     """The model's training batch (labels per step) from its config, None when it declares none."""
-    for key in _BATCH_KEYS:
-        if model_cfg.get(key) is not None:
-            return int(model_cfg[key])
-    return None
+    return None if model_cfg.get("batch") is None else int(model_cfg["batch"])
 
 
 def fit_limit(train_cfg: Mapping[str, Any], model_cfg: Mapping[str, Any], n_labels: int | None) -> FitLimit:

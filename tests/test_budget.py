@@ -15,9 +15,9 @@ TRAIN = {"max_steps": 1000, "max_seconds": 5.0, "max_epochs": 2.5}
 
 
 def test_steps_and_epochs_have_no_time_limit_and_wall_clock_keeps_it():
-    steps = fit_limit({**TRAIN, "budget": "steps"}, {"batch_size": 100}, 1000)
+    steps = fit_limit({**TRAIN, "budget": "steps"}, {"batch": 100}, 1000)
     assert (steps.max_steps, steps.max_seconds) == (1000, math.inf)
-    epochs = fit_limit({**TRAIN, "budget": "epochs"}, {"batch_size": 300}, 1000)
+    epochs = fit_limit({**TRAIN, "budget": "epochs"}, {"batch": 300}, 1000)
     assert (epochs.max_steps, epochs.max_seconds) == (9, math.inf)  # ceil(2.5 * 1000 / 300)
     assert fit_limit({**TRAIN, "budget": "epochs"}, {"batch": 250}, 1000).max_steps == 10
     clock = fit_limit({**TRAIN, "budget": "wall-clock"}, {}, None)
@@ -25,8 +25,8 @@ def test_steps_and_epochs_have_no_time_limit_and_wall_clock_keeps_it():
 
 
 def test_the_record_names_the_bound_that_ended_the_fit():
-    limit = fit_limit({**TRAIN, "budget": "wall-clock"}, {"batch_size": 100}, 1000)
-    assert fit_record(limit, "max_seconds", 30, {"batch_size": 100}, 1000) == {"budget": "wall-clock", "epochs": 3.0}
+    limit = fit_limit({**TRAIN, "budget": "wall-clock"}, {"batch": 100}, 1000)
+    assert fit_record(limit, "max_seconds", 30, {"batch": 100}, 1000) == {"budget": "wall-clock", "epochs": 3.0}
     steps = fit_limit({**TRAIN, "budget": "steps"}, {}, 1000)
     assert fit_record(steps, "max_steps", 30, {}, 1000) == {"budget": "steps", "epochs": None}  # no batch: no epochs
 
@@ -36,11 +36,11 @@ def test_the_record_names_the_bound_that_ended_the_fit():
                                            ({"budget": "epochs", "max_epochs": 0}, "train.max_epochs 0")])
 def test_bad_budgets_name_the_key(train, message):
     with pytest.raises(InputError, match=message):
-        fit_limit({**TRAIN, **train}, {"batch_size": 100}, 1000)
+        fit_limit({**TRAIN, **train}, {"batch": 100}, 1000)
 
 
 def test_an_epoch_budget_on_a_label_subset_runs_and_is_recorded(tmp_path):
-    args = ["model=ddf", "model.width=16", "model.depth=2", "model.batch_size=500", "shape=sphere", "eval=smoke",
+    args = ["model=ddf", "model.width=16", "model.depth=2", "model.batch=500", "shape=sphere", "eval=smoke",
             "eval.n_points=1000", "eval.mesh_resolution=16", "scene=none", "sampling=random",
             "sampling.n_samples=3000", "train.budget=epochs", "train.max_epochs=2", "train.n_labels=1000",
             "train.n_probes=0", "threads=1", "quiet=true", f"out_dir={tmp_path}"]

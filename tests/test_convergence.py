@@ -52,11 +52,16 @@ def test_report_writes_the_band_plot_and_the_time_to_floor_table(tmp_path):
 
 
 def test_the_convergence_sweep_is_every_learned_family_on_bunny_and_bone_with_three_seeds():
+    from ddfbench import plugins
+    from ddfbench.models import learned_families
     from ddfbench.report.status import expected_grid
 
     jobs, _ = expected_grid("/nonexistent/convergence", ["+experiment=convergence"])
     swept = [dict(o.split("=", 1) for o in j.swept) for j in jobs]
+    models = plugins.members("model", "convergence")
+    family = {m: plugins.plugin_yaml("model", m)["family"] for m in models}
+    assert set(family.values()) == set(learned_families())  # every learned family, and only those
+    assert {"ddf", "ddf_paper", "neural_sdf", "gan_sdf"} <= set(models)
     assert {(s["model"], s["shape"], s["seed"]) for s in swept} == {
-        (m, sh, str(seed)) for m in ("ddf", "ddf_paper", "neural_sdf", "gan_sdf") for sh in ("bunny", "bone")
-        for seed in range(3)}
-    assert len({j.key for j in jobs}) == 24
+        (m, sh, str(seed)) for m in models for sh in ("bunny", "bone") for seed in range(3)}
+    assert len({j.key for j in jobs}) == len(models) * 6
