@@ -25,8 +25,9 @@ KEY_FILE = "ddfbench_key.txt"  # written in each Hydra job folder: which record 
 
 
 @hydra.main(version_base="1.3", config_path=CONF_DIR, config_name="config")
-def task(cfg: DictConfig) -> str:
-    """One Hydra job: resolve the config, run it, return the record key."""
+def task(cfg: DictConfig) -> str | float:
+    """One Hydra job: resolve the config, run it, return the record key (with `objective` set: that
+    metric of the record, for an optimizing sweeper)."""
     from ddfbench import launch, runner
     from ddfbench.report.tables import summarize, to_markdown
 
@@ -47,6 +48,10 @@ def task(cfg: DictConfig) -> str:
         if record["status"] != "ok":
             print(f"ddfbench: {record['error']}", file=sys.stderr)
             sys.exit(1)
+    if cfg.get("objective"):
+        from ddfbench.metric_registry import objective_value
+
+        return objective_value(record, str(cfg.objective))
     return record["key"]
 
 

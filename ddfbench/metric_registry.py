@@ -116,6 +116,20 @@ def by_name() -> dict[str, Metric]:
     return {m.name: m for m in METRICS}
 
 
+def objective_value(record: Mapping[str, Any], name: str) -> float:
+    """Metric `name` of a record as an optimizer's objective: its empty-reconstruction penalty where the
+    run failed or holds no finite value (inf for a metric without one). Unknown names are an InputError."""
+    from ddfbench.errors import InputError
+
+    metric = by_name().get(name)
+    if metric is None:
+        raise InputError(f"objective={name}: not a metric (known: {', '.join(m.name for m in METRICS)})")
+    value = metric.read(record) if record.get("status") == "ok" else float("nan")
+    if np.isfinite(value):
+        return value
+    return float("inf") if metric.penalty is None else float(metric.penalty)
+
+
 def penalties() -> dict[str, Any]:
     """The nested `record.metrics` dict of an empty reconstruction: every declared penalty at its path."""
     out: dict[str, Any] = {}

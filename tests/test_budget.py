@@ -39,6 +39,7 @@ def test_bad_budgets_name_the_key(train, message):
         fit_limit({**TRAIN, **train}, {"batch": 100}, 1000)
 
 
+@pytest.mark.slow
 def test_an_epoch_budget_on_a_label_subset_runs_and_is_recorded(tmp_path):
     args = ["model=ddf", "model.width=16", "model.depth=2", "model.batch=500", "shape=sphere", "eval=smoke",
             "eval.n_points=1000", "eval.mesh_resolution=16", "scene=none", "sampling=random",

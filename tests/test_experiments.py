@@ -42,13 +42,16 @@ def swept(job):
     return dict(o.split("=", 1) for o in job.swept)
 
 
+LARGE = pytest.mark.slow  # composing a job's config takes ~0.2 s: grids of 80+ jobs leave the fast lane
+
+
 @pytest.mark.parametrize("experiment,n_jobs", [
-    ("ablation", lambda: 7 * 3), ("ablation_grid", lambda: 27 * 3),                    # x 3 seeds
+    ("ablation", lambda: 7 * 3), pytest.param("ablation_grid", lambda: 27 * 3, marks=LARGE),  # x 3 seeds
     ("sampling", lambda: 4 * n_members("sampling", "sampling") * 3),                 # levels xs s m l
-    ("representations", lambda: 4 * n_members("model", "representations") * 5),     # 4 shapes, 5 seeds
-    ("storage", lambda: 4 * n_members("model", "storage") * 3),
-    ("pareto", lambda: 4 * n_members("model", "pareto") * 3),
-    ("render_time", lambda: 3 * n_members("model", "render_time") * 3),             # 3 image sizes
+    pytest.param("representations", lambda: 4 * n_members("model", "representations") * 5, marks=LARGE),
+    pytest.param("storage", lambda: 4 * n_members("model", "storage") * 3, marks=LARGE),
+    pytest.param("pareto", lambda: 4 * n_members("model", "pareto") * 3, marks=LARGE),
+    pytest.param("render_time", lambda: 3 * n_members("model", "render_time") * 3, marks=LARGE),  # 3 image sizes
     ("smoke", lambda: n_members("model", "smoke") * n_members("sampling", "smoke"))])
 def test_experiment_expands_to_its_documented_grid(experiment, n_jobs, tmp_path):
     jobs = grid(experiment)
@@ -56,6 +59,7 @@ def test_experiment_expands_to_its_documented_grid(experiment, n_jobs, tmp_path)
     assert len({j.key for j in jobs}) == len(jobs)  # every job is a distinct configuration
 
 
+@LARGE
 def test_ablation_is_one_factor_at_a_time_and_shares_records_with_the_grid(tmp_path):
     points = set()
     for job in grid("ablation"):
@@ -67,6 +71,7 @@ def test_ablation_is_one_factor_at_a_time_and_shares_records_with_the_grid(tmp_p
     assert {j.key for j in grid("ablation")} <= {j.key for j in grid("ablation_grid")}
 
 
+@LARGE
 def test_budget_overrides_and_seeds_change_the_grid(tmp_path):
     base = grid("sampling")
     scaled = grid("sampling", "train.max_steps=5", "seed=0,1,2,3")

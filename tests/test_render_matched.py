@@ -60,6 +60,7 @@ def test_sizes_are_compared_only_with_their_own_size():
     assert set(df["size"]) == {"64x64"}
 
 
+@pytest.mark.slow
 def test_render_matched_grid_sweeps_tracer_settings_of_the_sdf_families():
     from ddfbench.report.status import expected_grid
 

@@ -4,6 +4,8 @@ and another seed gives another sample draw, initialization and batch order (diff
 import subprocess
 import sys
 
+import pytest
+
 from ddfbench.runs import find_records
 
 FAMILIES = ("grid_sdf", "neural_sdf", "ddf")  # deterministic on one CPU thread
@@ -29,6 +31,7 @@ def geometry(rec):
     return {k: v for k, v in rec["metrics"].items() if k != "n_points"}
 
 
+@pytest.mark.slow
 def test_a_step_budget_run_twice_gives_identical_metrics_and_seeds_differ(tmp_path):
     first, second = sweep(tmp_path / "a", "seed=0"), sweep(tmp_path / "b", "seed=0,1")
     assert set(first) == {(f, 0) for f in FAMILIES} and set(second) == {(f, s) for f in FAMILIES for s in (0, 1)}

@@ -1,7 +1,8 @@
 """`python -m ddfbench.report.regenerate [--only E1,E2] [--results DIR] [--reports DIR] [-- OVERRIDE ...]`
 
-Regenerates the committed reports: for each experiment (default: ablation, sampling, representations,
+Regenerates the committed reports: for each experiment (default: tune, ablation, sampling, representations,
 storage, render_time, render_matched, pareto, convergence) runs `python -m ddfbench +experiment=<e> out_dir=<results> [OVERRIDE ...]`
+(tune: once per model that declares a search space, report by ddfbench.report.tune)
 (finished runs are skipped, so an interrupted regeneration resumes), then writes
 `python -m ddfbench.report <results>/<e> --out <reports>/<e>` (render_matched: `python -m
 ddfbench.report.matched <results>/render_time <results>/render_matched --out <reports>/render_matched`). With overrides the report's first line
@@ -20,35 +21,43 @@ import subprocess
 import sys
 import time
 
+from ddfbench import plugins, tune
 from ddfbench.report.__main__ import MixedCommits, write_report
 from ddfbench.report import matched
+from ddfbench.report import tune as tune_report
 from ddfbench.report.claims import write_claims
 
-EXPERIMENTS = ("ablation", "sampling", "representations", "storage", "render_time", "render_matched", "pareto",
+EXPERIMENTS = ("tune", "ablation", "sampling", "representations", "storage", "render_time", "render_matched", "pareto",
                "convergence")
 
 
-def sweep_command(experiment: str, results: str, overrides: list[str]) -> list[str]:
-    """The command line that runs one experiment's sweep into results/<experiment>."""
-    return [sys.executable, "-m", "ddfbench", f"+experiment={experiment}", f"out_dir={results}", "quiet=true",
-            *overrides]
+def sweep_commands(experiment: str, results: str, overrides: list[str]) -> list[list[str]]:
+    """The command lines that run one experiment's sweep into results/<experiment>: one, or for `tune`
+    one Optuna study per model that declares a search space."""
+    base = [sys.executable, "-m", "ddfbench", f"+experiment={experiment}", f"out_dir={results}", "quiet=true"]
+    if experiment == tune.EXPERIMENT:
+        return [[*base, f"model={m}", *overrides] for m in plugins.members("model", tune.EXPERIMENT)]
+    return [[*base, *overrides]]
 
 
 def regenerate(experiment: str, results: str, reports: str, overrides: list[str], note: str | None,
                run: bool = True) -> int:
     """Run one experiment (unless run=False) and write its report; return the sweep's exit code."""
     rc, seconds = 0, None
+    commands = sweep_commands(experiment, results, overrides)
     if run:
-        cmd = sweep_command(experiment, results, overrides)
-        print("$", " ".join(cmd[1:]), flush=True)
         t0 = time.perf_counter()
-        rc = subprocess.run(cmd).returncode
+        for cmd in commands:
+            print("$", " ".join(cmd[1:]), flush=True)
+            rc = max(rc, subprocess.run(cmd).returncode)
         seconds = time.perf_counter() - t0
     out = os.path.join(reports, experiment)
     if overrides and note is None:
         note = "reduced budget: " + " ".join(overrides)
     if experiment == "render_matched":  # its table sets the DDF's render_time rows beside the tracer settings
         rc = max(rc, matched.main([os.path.join(results, "render_time"), os.path.join(results, experiment), "--out", out]))
+    elif experiment == tune.EXPERIMENT:
+        rc = max(rc, tune_report.main([os.path.join(results, experiment), "--out", out]))
     else:
         try:
             write_report(os.path.join(results, experiment), out, note=note, sweep=[f"+experiment={experiment}", *overrides])
@@ -57,7 +66,7 @@ def regenerate(experiment: str, results: str, reports: str, overrides: list[str]
             return 2
     if seconds is not None:
         with open(os.path.join(out, "wall_time.txt"), "w") as fh:
-            fh.write(f"{seconds:.0f} s  {' '.join(sweep_command(experiment, results, overrides)[1:])}\n")
+            fh.writelines(f"{seconds:.0f} s in all  {' '.join(cmd[1:])}\n" for cmd in commands)
         print(f"{experiment}: sweep exit {rc}, {seconds:.0f} s wall; report in {out}", flush=True)
     return rc
 

@@ -1,0 +1,98 @@
+"""`+experiment=tune`: search spaces read from the family YAMLs, trials drawn inside them, the objective a
+job returns, and the study's report and resumption."""
+
+import math
+import subprocess
+import sys
+
+import pandas as pd
+import pytest
+
+from ddfbench import plugins, tune
+from ddfbench.errors import InputError
+from ddfbench.metric_registry import by_name, objective_value
+from ddfbench.runs import find_records
+
+optuna = pytest.importorskip("optuna", reason="the `tune` extra (hydra-optuna-sweeper) is not installed")
+
+
+def test_every_learned_family_declares_a_space_and_the_paper_presets_do_not():
+    tuned = set(plugins.members("model", tune.EXPERIMENT))
+    assert {"ddf", "neural_sdf", "gan_sdf"} <= tuned
+    assert not {"ddf_paper", "ddf_paper_lr", "mesh", "grid_sdf"} & tuned  # as written / not learned
+    for model in tuned:
+        assert tune.search_space(model)
+
+
+@pytest.mark.parametrize("spec,message", [
+    ({"model.lr": {"log": [0.0, 1.0]}}, "log needs [low, high]"),
+    ({"model.lr": {"float": [1.0, 0.5]}}, "float needs [low, high]"),
+    ({"model.lr": {"normal": [0, 1]}}, "kind one of log, float, int, choice"),
+    ({"model.widht": {"choice": [64]}}, "not a key of the model"),
+    ({"model.width": {"choice": []}}, "choice needs at least one value")])
+def test_a_malformed_space_is_one_line_naming_the_file_and_entry(monkeypatch, spec, message):
+    monkeypatch.setattr(plugins, "levels", lambda group, name, experiment: spec)
+    with pytest.raises(InputError) as err:
+        tune.search_space("ddf")
+    text = str(err.value)
+    assert "conf/model/ddf.yaml: experiments.tune." in text and message in text and "\n" not in text
+
+
+def test_suggest_draws_every_key_inside_its_declared_range():
+    from omegaconf import OmegaConf
+
+    config = OmegaConf.create({"hydra": {"runtime": {"choices": {"model": "ddf"}}}})
+    study = optuna.create_study(sampler=optuna.samplers.RandomSampler(seed=3))
+    space = tune.search_space("ddf")
+    for _ in range(20):
+        trial = study.ask()
+        tune.suggest(config, trial)
+        assert set(trial.params) == set(space)
+        for path, (kind, values) in space.items():
+            value = trial.params[path]
+            if kind == "choice":
+                assert value in values
+            else:
+                assert values[0] <= value <= values[1]
+                assert isinstance(value, int) == (kind == "int")
+        study.tell(trial, 1.0)
+
+
+def test_the_objective_is_the_metric_or_its_penalty():
+    chamfer = by_name()["chamfer_l2"]
+    ok = {"status": "ok", "metrics": {"chamfer_l2": 2.5e-5}}
+    assert objective_value(ok, "chamfer_l2") == 2.5e-5
+    assert objective_value({"status": "failed", "metrics": {}}, "chamfer_l2") == chamfer.penalty
+    assert objective_value({"status": "ok", "metrics": {"chamfer_l2": math.nan}}, "chamfer_l2") == chamfer.penalty
+    assert objective_value({"status": "ok", "metrics": {}}, "mask_iou") == math.inf  # no penalty declared
+    with pytest.raises(InputError, match="objective=chamfr: not a metric"):
+        objective_value(ok, "chamfr")
+
+
+@pytest.mark.slow
+def test_a_study_runs_reports_and_resumes_from_its_records(tmp_path):
+    from ddfbench.report.tune import write
+
+    cmd = [sys.executable, "-m", "ddfbench", "+experiment=tune", "model=neural_sdf", "hydra.sweeper.n_trials=3",
+           "shape.name=sphere", "train.max_seconds=0.5", "eval.n_points=1000", "eval.mesh_resolution=16",
+           "train.probe_points=500", "sampling.s_dr=2", "sampling.s_p=2", "threads=1", "quiet=true",
+           f"out_dir={tmp_path}"]
+    first = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
+    assert first.returncode == 0, first.stderr[-2000:]
+    records = find_records(str(tmp_path / "tune"))
+    assert len(records) == 3 and all(r["status"] == "ok" for r in records)
+    drawn = {tuple(sorted(o for o in r["overrides"] if o.startswith("model."))) for r in records}
+    assert len(drawn) == 3  # three different trials, each a record of its own
+
+    again = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
+    assert again.returncode == 0, again.stderr[-2000:]
+    assert len(find_records(str(tmp_path / "tune"))) == 3  # the seeded sampler re-proposed the same trials
+
+    df = write(str(tmp_path / "tune"), str(tmp_path / "report"))
+    assert list(df["trial"]) == [0, 1, 2]
+    csv = pd.read_csv(tmp_path / "report" / "trials.csv")
+    assert set(tune.search_space("neural_sdf")) <= set(csv.columns)
+    best = (tmp_path / "report" / "best.md").read_text()
+    assert "Every model: 3 trials, 0.5 s of fit each" in best
+    assert f"{csv['objective'].min():.4g}" in best
+    assert (tmp_path / "report" / "tune.png").stat().st_size > 0
