@@ -2,7 +2,8 @@
 
 The slow test copies the package and the config tree, adds a copy of grid_sdf under a new name and a
 copy of the random sampler under a new name (one .py and one .yaml each), and shows that both join
-every experiment their YAML names, run in the smoke sweep and reach the report table.
+every experiment their YAML names, run in the smoke sweep and reach the report table and plots, and
+that the copied family runs in default, representations, pareto and storage at its own levels.
 """
 
 import json
@@ -17,6 +18,7 @@ import pytest
 from ddfbench import CONF_DIR, plugins
 from ddfbench.errors import InputError
 from ddfbench.models import load_family
+from ddfbench.runs import find_records
 
 PACKAGE_DIR = os.path.dirname(os.path.dirname(os.path.abspath(plugins.__file__)))
 
@@ -108,6 +110,42 @@ def test_a_copied_family_and_sampler_join_the_experiments_and_the_report(tmp_pat
     assert ddf_row["n_samples_mean"] > 0 and ddf_row["sampling_s_mean"] > 0  # the copied sampler made its labels
     grid_row = rows[rows["model"] == "grid_copy"].iloc[0]
     assert pd.isna(grid_row["n_samples_mean"]) and pd.isna(grid_row["sampling_s_mean"])  # a grid needs none
+    legends = _plot_legends(tmp_path / "out" / "smoke", env, root)
+    assert "grid_copy" in legends["pareto"] and "ddf" in legends["pareto"]
+    assert any("random_copy" in label for label in legends["sampling"])
+
+    # One job of the copied family in each other experiment it joins, at its own level where there are levels.
+    levels = plugins.levels("model", "grid_sdf", "pareto")["c2"]["model"]
+    for experiment, extra in (("default", []), ("representations", []), ("pareto", ["capacity=c2"]),
+                              ("storage", ["capacity=c2"])):
+        job = subprocess.run([sys.executable, "-m", "ddfbench", f"+experiment={experiment}", "hydra.sweeper.params=null",
+                              "model=grid_copy", "shape.name=sphere", "eval=smoke", "scene=none", *extra,
+                              f"out_dir={tmp_path / 'jobs'}", "quiet=true", "threads=1"],
+                             capture_output=True, text=True, env=env, cwd=str(root), timeout=300)
+        assert job.returncode == 0, (experiment, job.stderr[-2000:])
+        rec = find_records(str(tmp_path / "jobs" / experiment))
+        assert len(rec) == 1 and rec[0]["status"] == "ok" and rec[0]["model"] == "grid_copy", experiment
+        if experiment == "pareto":
+            assert rec[0]["config"]["model"]["resolution"] == levels["resolution"]
+        if experiment == "storage":
+            own = plugins.levels("model", "grid_sdf", "storage")["c2"]["model"]
+            assert all(rec[0]["config"]["model"][k] == v for k, v in own.items())
+
+
+def _plot_legends(records_dir, env, root):
+    """{plot kind: legend labels} of the smoke report's plots, drawn in the copied tree."""
+    script = ("import json, sys; from ddfbench.report import plots; from ddfbench.runs import find_records\n"
+              "seen = {}\n"
+              "def keep(fig, out_dir, name):\n"
+              "    seen[name] = [t.get_text() for ax in fig.axes if ax.get_legend() for t in ax.get_legend().get_texts()]\n"
+              "    return []\n"
+              "plots._save = keep\n"
+              "plots.write_plots(find_records(sys.argv[1]), '/unused', plots.plots_for('smoke'))\n"
+              "print(json.dumps(seen))")
+    out = subprocess.run([sys.executable, "-c", script, str(records_dir)], capture_output=True, text=True, env=env,
+                         cwd=str(root), timeout=300)
+    assert out.returncode == 0, out.stderr[-2000:]
+    return json.loads(out.stdout)
 
 
 def test_command_line_overrides_are_checked_against_the_named_plugin():
