@@ -99,9 +99,7 @@ def _known_keys(group: str, args: list[str]) -> tuple[dict[str, Any], dict[str, 
     known: dict[str, Any] = {}
     for name in names:
         own = plugins.defaults(group, name)
-        known.update(own)
-        if group == "model":
-            known.update(plugins.defaults(group, str(own.get(plugins.NAME_KEYS[group], name))))
+        known.update(plugins.model_defaults(name) if group == "model" else own)
     return known, (own if len(names) == 1 else known)
 
 

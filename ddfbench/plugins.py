@@ -59,6 +59,13 @@ def defaults(group: str, name: str) -> dict[str, Any]:
     return {k: v for k, v in plugin_yaml(group, name).items() if k != META_KEY}
 
 
+def model_defaults(name: str) -> dict[str, Any]:
+    """A model config's complete defaults: its family's YAML overlaid by its own (a preset such as
+    ddf_paper names its family and gives only what differs)."""
+    own = defaults("model", name)
+    return {**defaults("model", str(own.get(NAME_KEYS["model"], name))), **own}
+
+
 def _check_types(label: str, given: Mapping[str, Any], default: Mapping[str, Any]) -> None:
     for key, value in given.items():
         ref = default[key]

@@ -32,8 +32,7 @@ def search_space(model: str) -> dict[str, tuple[str, list[Any]]]:
     A malformed entry (unknown kind, bounds not increasing, a key the model does not have) is a one-line
     InputError naming the file and the entry.
     """
-    known = plugins.defaults("model", model)
-    known.update(plugins.defaults("model", str(known.get(plugins.NAME_KEYS["model"], model))))
+    known = plugins.model_defaults(model)
     out: dict[str, tuple[str, list[Any]]] = {}
     for path, dist in plugins.levels("model", model, EXPERIMENT).items():
         where = f"conf/model/{model}.yaml: experiments.{EXPERIMENT}.{path}"

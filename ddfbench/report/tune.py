@@ -48,9 +48,7 @@ def trials(records: list[dict[str, Any]]) -> pd.DataFrame:
 
 
 def _preset_value(model: str, path: str) -> Any:
-    own = plugins.defaults("model", model)
-    family = plugins.defaults("model", str(own.get(plugins.NAME_KEYS["model"], model)))
-    node: Any = {**family, **own}
+    node: Any = plugins.model_defaults(model)
     for key in path.split(".")[1:]:
         node = node.get(key) if isinstance(node, dict) else None
     return node
