@@ -123,11 +123,28 @@ def checked_overrides(args: list[str]) -> list[str]:
     return out
 
 
+EXTRA_OF_EXPERIMENT = {"tune": ("optuna", "tune")}  # experiment -> (module it needs, pip extra that installs it)
+
+
+def check_extras(args: list[str]) -> None:
+    """A one-line InputError when the experiment named in args needs an extra that is not installed."""
+    import importlib.util
+
+    from ddfbench.errors import InputError
+
+    for arg in args:
+        name = arg.split("=", 1)[1] if arg.lstrip("+").startswith("experiment=") else None
+        if name in EXTRA_OF_EXPERIMENT and importlib.util.find_spec(EXTRA_OF_EXPERIMENT[name][0]) is None:
+            raise InputError(f"+experiment={name}: needs the `{EXTRA_OF_EXPERIMENT[name][1]}` extra "
+                             f"(pip install -e \".[{EXTRA_OF_EXPERIMENT[name][1]}]\")")
+
+
 def main() -> None:
     """Entry point. Without `model=` or `+experiment=`, run `+experiment=default` with the given overrides."""
     from ddfbench.errors import InputError
 
     try:
+        check_extras(sys.argv[1:])
         sys.argv[1:] = checked_overrides(sys.argv[1:])
     except InputError as err:
         print(f"ddfbench: {err}", file=sys.stderr)

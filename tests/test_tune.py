@@ -69,6 +69,18 @@ def test_the_objective_is_the_metric_or_its_penalty():
         objective_value(ok, "chamfr")
 
 
+def test_without_the_extra_the_tune_experiment_is_one_line(monkeypatch):
+    import importlib.util
+
+    from ddfbench import cli
+
+    real = importlib.util.find_spec
+    monkeypatch.setattr(importlib.util, "find_spec", lambda name, *a: None if name == "optuna" else real(name, *a))
+    with pytest.raises(InputError, match=r'^\+experiment=tune: needs the `tune` extra \(pip install -e "\.\[tune\]"\)$'):
+        cli.check_extras(["+experiment=tune", "model=ddf"])
+    cli.check_extras(["+experiment=smoke"])  # other experiments need no extra
+
+
 @pytest.mark.slow
 def test_a_study_runs_reports_and_resumes_from_its_records(tmp_path):
     from ddfbench.report.tune import write
