@@ -100,11 +100,15 @@ def test_a_study_runs_reports_and_resumes_from_its_records(tmp_path):
     assert again.returncode == 0, again.stderr[-2000:]
     assert len(find_records(str(tmp_path / "tune"))) == 3  # the seeded sampler re-proposed the same trials
 
+    preset = subprocess.run([*cmd, "hydra.mode=RUN"], capture_output=True, text=True, timeout=600)
+    assert preset.returncode == 0, preset.stderr[-2000:]  # the preset's own values at the same budget
+
     df = write(str(tmp_path / "tune"), str(tmp_path / "report"))
-    assert list(df["trial"]) == [0, 1, 2]
+    assert list(df["kind"]) == ["trial"] * 3 + ["preset"] and list(df["trial"].dropna()) == [0, 1, 2]
     csv = pd.read_csv(tmp_path / "report" / "trials.csv")
     assert set(tune.search_space("neural_sdf")) <= set(csv.columns)
     best = (tmp_path / "report" / "best.md").read_text()
     assert "Every model: 3 trials, 0.5 s of fit each" in best
-    assert f"{csv['objective'].min():.4g}" in best
+    assert f"{csv[csv['kind'] == 'trial']['objective'].min():.4g}" in best
+    assert f"same budget: CD-L2 x10^3 {csv[csv['kind'] == 'preset']['objective'].iloc[0]:.4g}" in best
     assert (tmp_path / "report" / "tune.png").stat().st_size > 0

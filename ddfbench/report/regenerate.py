@@ -33,10 +33,11 @@ EXPERIMENTS = ("tune", "ablation", "sampling", "representations", "storage", "re
 
 def sweep_commands(experiment: str, results: str, overrides: list[str]) -> list[list[str]]:
     """The command lines that run one experiment's sweep into results/<experiment>: one, or for `tune`
-    one Optuna study per model that declares a search space."""
+    per model that declares a search space its Optuna study and one run of its preset at the same budget."""
     base = [sys.executable, "-m", "ddfbench", f"+experiment={experiment}", f"out_dir={results}", "quiet=true"]
     if experiment == tune.EXPERIMENT:
-        return [[*base, f"model={m}", *overrides] for m in plugins.members("model", tune.EXPERIMENT)]
+        return [cmd for m in plugins.members("model", tune.EXPERIMENT)
+                for cmd in ([*base, f"model={m}", *overrides], [*base, f"model={m}", "hydra.mode=RUN", *overrides])]
     return [[*base, *overrides]]
 
 
