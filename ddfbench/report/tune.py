@@ -58,9 +58,19 @@ def _preset_value(model: str, path: str) -> Any:
     return node
 
 
-def best(df: pd.DataFrame) -> list[str]:
+def provenance(records: list[dict[str, Any]], records_dir: str) -> str:
+    """One line: how many records, from where, which code commits, threads and CPU they ran with."""
+    env = [r.get("env") or {} for r in records]
+    commits = sorted({str(e.get("code_sha") or e.get("git_sha"))[:7] for e in env})
+    threads = sorted({str(e.get("threads")) for e in env})
+    cpus = sorted({str(e.get("cpu")) for e in env})
+    return (f"{len(records)} records from `{records_dir}` (code {', '.join(commits)}; threads {', '.join(threads)}; "
+            f"cpu {', '.join(cpus)}).")
+
+
+def best(df: pd.DataFrame, header: str = "") -> list[str]:
     """Markdown lines: per model the best trial, its values beside the preset's, and the budget check."""
-    lines = ["# Best trial per model", ""]
+    lines = ["# Best trial per model", "", *([header, ""] if header else [])]
     studies = df[df["kind"] == "trial"]
     budgets = {m: (len(g), tuple(sorted(set(df.loc[df["model"] == m, "max_seconds"])))) for m, g in studies.groupby("model")}
     if len(set(budgets.values())) > 1:
@@ -125,7 +135,7 @@ def write(records_dir: str, out: str) -> pd.DataFrame:
             cols = ["kind", "trial", *search_space(str(model)), "objective", "status", "steps", "fit_s"]
             fh.write(f"## {model}\n\n{group[cols].to_markdown(index=False, floatfmt='.4g')}\n\n")
     with open(os.path.join(out, "best.md"), "w") as fh:
-        fh.write("\n".join(best(df)) + "\n")
+        fh.write("\n".join(best(df, provenance(records, records_dir))) + "\n")
     with open(os.path.join(out, "space.md"), "w") as fh:
         fh.write("\n".join(space_lines(sorted(df["model"].unique()))) + "\n")
     plot(df, os.path.join(out, "tune.png"))
@@ -143,7 +153,7 @@ def main(argv: list[str] | None = None) -> int:
     except FileNotFoundError as err:
         print(f"ddfbench.report.tune: {err}", file=sys.stderr)
         return 2
-    for model, group in df.groupby("model"):
+    for model, group in df[df["kind"] == "trial"].groupby("model"):
         b = group["objective"].min()
         print(f"{model}: {len(group)} trials, best CD-L2 x10^3 {b:.4g}" if math.isfinite(b) else f"{model}: no trial")
     return 0
