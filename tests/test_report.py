@@ -316,3 +316,15 @@ def test_a_report_commit_between_runs_is_not_a_code_change(tmp_path):
     for r in recs:
         write_json_atomic(str(tmp_path / "rec" / r["key"] / "record.json"), r)
     assert report_main([str(tmp_path / "rec"), "--out", str(tmp_path / "rep"), "--plots", "none"]) == 0
+
+
+def test_report_says_which_models_built_from_the_exact_mesh(tmp_path):
+    recs = [make_record(model=m, key=m) for m in ("ddf", "neural_sdf", "grid_sdf", "mesh_lod500")]
+    recs.append({**make_record(model="hashgrid", key="hashgrid"), "family": "hashgrid"})  # not in this checkout
+    for r in recs:
+        write_json_atomic(str(tmp_path / "rec" / r["key"] / "record.json"), r)
+    assert report_main([str(tmp_path / "rec"), "--out", str(tmp_path / "rep"), "--plots", "none"]) == 0
+    text = (tmp_path / "rep" / "report.md").read_text()
+    assert "- grid_sdf, mesh_lod500: the exact mesh (no training samples)" in text
+    assert "- ddf: ray samples" in text and "- neural_sdf: SDF samples" in text
+    assert "hashgrid:" not in text

@@ -27,6 +27,7 @@ from typing import Any
 
 import pandas as pd
 
+from ddfbench.errors import InputError
 from ddfbench.report import convergence
 from ddfbench.report.gallery import write_gallery
 from ddfbench.report.paired import paired_report
@@ -63,6 +64,32 @@ def code_commits(records: list[dict[str, Any]]) -> list[str]:
     env.git_sha for older records ("unknown" where a record has neither)."""
     env = [r.get("env") or {} for r in records]
     return sorted({str(e.get("code_sha") or e.get("git_sha") or "unknown") for e in env})
+
+
+SOURCE_OF_KIND = {
+    None: "the exact mesh (no training samples)",
+    "rays": "ray samples: exact hit distances and hit / line-hit labels from the sampler",
+    "sdf": "SDF samples: exact signed distances at points",
+}
+
+
+def information_lines(records: list[dict[str, Any]]) -> list[str]:
+    """Markdown lines saying what each model in the records was built or trained from (its family's
+    sample_kind), so that a row built from the exact mesh is not read as a learned result."""
+    from ddfbench.models import load_family
+
+    by_source: dict[str, set[str]] = {}
+    for rec in records:
+        family = str(rec.get("family"))
+        try:
+            kind = load_family(family).sample_kind
+        except InputError:  # a family this checkout does not have
+            continue
+        by_source.setdefault(SOURCE_OF_KIND.get(kind, str(kind)), set()).add(str(rec.get("model")))
+    if not by_source:
+        return []
+    return ["What each model had to build from:", ""] + [f"- {', '.join(sorted(models))}: {source}"
+                                                       for source, models in sorted(by_source.items())]
 
 
 def write_report(records_dir: str, out_dir: str, note: str | None = None,
@@ -104,7 +131,7 @@ def write_report(records_dir: str, out_dir: str, note: str | None = None,
     if len(shas) > 1:
         lines += [f"**Mixed code commits: {', '.join(shas)}: rows may not be comparable.**", ""]
     lines += [f"{len(records)} run records from `{records_dir}` (code: {', '.join(shas) or 'unknown'}).", ""]
-    lines += _sweep_lines(records_dir, sweep) + ["", md]
+    lines += _sweep_lines(records_dir, sweep) + ["", md, "", *information_lines(records)]
     for part in extra:
         lines += ["", part]
     lines += [f"![{os.path.basename(p)}]({os.path.basename(p)})" for p in written if p.endswith(".png")]
