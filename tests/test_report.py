@@ -166,13 +166,14 @@ def test_a_new_metric_declaration_reaches_the_table_with_its_empty_penalty(monke
     monkeypatch.setattr(metric_registry, "METRICS", [*metric_registry.METRICS, new])
     empty = penalty_metrics([0.01])
     assert empty["hausdorff"] == 7.5 and empty["empty_reconstruction"]
-    recs = [make_record(width=64), make_record(width=128)]
+    recs = [make_record(width=64), make_record(width=128), make_record(width=128, seed=1)]
     recs[0]["metrics"]["hausdorff"] = 0.002
     recs[1]["metrics"] = {**empty, "noise_floor": recs[1]["metrics"]["noise_floor"]}
+    recs[2]["metrics"]["hausdorff"] = 0.004
     df = tables.summarize(recs)
-    assert sorted(df["hausdorff_mean"]) == [0.002, 7.5]
+    assert sorted(df["hausdorff_mean"]) == pytest.approx([0.002, 3.752])  # the empty run counts its penalty
     md = tables.to_markdown(df)
-    assert "Hausdorff ×10³" in md and "| 7500 ≈ |" in md and "| 2 ≈ |" in md  # n = 1: tied
+    assert "Hausdorff ×10³" in md and "| 3752 ± 5.3e+03 ≈ |" in md and "| 2 ≈ |" in md  # n = 1: tied
 
 
 def test_noise_floor_is_its_own_row_per_shape():
@@ -328,3 +329,22 @@ def test_report_says_which_models_built_from_the_exact_mesh(tmp_path):
     assert "- grid_sdf, mesh_lod500: the exact mesh (no training samples)" in text
     assert "- ddf: ray samples" in text and "- neural_sdf: SDF samples" in text
     assert "hashgrid:" not in text
+
+
+def test_a_row_whose_every_mesh_is_empty_says_not_converged_and_is_not_ranked():
+    recs = [make_record(model="ddf_paper", seed=s, chamfer=8.64) for s in (0, 1)]
+    for r in recs:
+        r["metrics"]["empty_reconstruction"] = True
+    recs += [make_record(model="ddf", seed=s, chamfer=c) for s, c in ((0, 2e-3), (1, 2.1e-3))]
+    partly = [make_record(model="neural_sdf", seed=s, chamfer=c) for s, c in ((0, 1e-3), (1, 8.64))]
+    partly[1]["metrics"]["empty_reconstruction"] = True  # one empty of two: still a result, still ranked
+    df = tables.summarize(recs + partly)
+    row = df.set_index("model")
+    assert row.loc["ddf_paper", "not_converged"] and not row.loc["neural_sdf", "not_converged"]
+    assert tables.marks(df, "chamfer_l2")[df["model"] == "ddf_paper"].eq("").all()
+    md = tables.to_markdown(df)
+    paper = next(line for line in md.splitlines() if line.startswith("| ddf_paper"))
+    assert "2 (2 empty) not converged" in paper and "8640" not in paper
+    ddf = next(line for line in md.splitlines() if line.startswith("| ddf |"))
+    assert "not converged" not in ddf
+    assert "not converged: every run's reconstruction was empty" in md

@@ -29,6 +29,7 @@ FLOOR_MODEL = "noise floor"  # the `model` cell of a noise-floor row
 SEED_KEYS = ("seed",)
 INCOMPLETE = "†"  # marks a row with fewer ok runs than the fullest row
 TIE = "≈"  # marks values whose interval overlaps the best one's
+NOT_CONVERGED = "not converged"  # the n cell of a row whose every reconstruction was empty
 
 
 def _metrics() -> dict[str, metric_registry.Metric]:
@@ -148,6 +149,7 @@ def summarize(records: Iterable[dict[str, Any]]) -> pd.DataFrame:
         entry["n_failed"] = len(members) - len(ok)
         entry["n_expected"] = n_expected
         entry["n_empty"] = sum(m["empty"] for m in ok)
+        entry["not_converged"] = bool(ok) and entry["n_empty"] == len(ok)  # nothing to rank: every mesh empty
         entry["errors"] = "; ".join(sorted({m["error"] for m in members if m["error"]}))
         entry["keys"] = " ".join(sorted(m["key"] for m in members))
         for name in _metrics():
@@ -196,7 +198,7 @@ def _shown_metrics(df: pd.DataFrame) -> list[str]:
 
 
 def _label_columns(df: pd.DataFrame) -> list[str]:
-    hidden = {"n", "n_failed", "n_expected", "n_empty", "errors", "keys"}
+    hidden = {"n", "n_failed", "n_expected", "n_empty", "not_converged", "errors", "keys"}
     return [c for c in df.columns if not c.endswith(("_mean", "_std", "_ci_lo", "_ci_hi")) and c not in hidden]
 
 
@@ -205,7 +207,8 @@ def marks(df: pd.DataFrame, metric: str) -> pd.Series:
     interval overlaps no other row's, else it and the rows overlapping it are "tie" (report.stats)."""
     out = pd.Series("", index=df.index, dtype=object)
     better = _metrics()[metric].better
-    for _, part in df.groupby("shape", sort=False):
+    ranked = df[~df["not_converged"].astype(bool)] if "not_converged" in df else df
+    for _, part in ranked.groupby("shape", sort=False):
         means = part[f"{metric}_mean"].astype(float).tolist()
         intervals = list(zip(part[f"{metric}_ci_lo"].astype(float), part[f"{metric}_ci_hi"].astype(float)))
         for i, mark in best_and_ties(means, intervals, better).items():
@@ -231,7 +234,8 @@ def _n_cell(row: pd.Series) -> str:
     if row["n"] < row["n_expected"]:
         text = f"{row['n']}/{row['n_expected']}{INCOMPLETE}"
     text += f" ({row['n_failed']} failed)" if row["n_failed"] else ""
-    return text + (f" ({row['n_empty']} empty)" if row.get("n_empty") else "")
+    text += f" ({row['n_empty']} empty)" if row.get("n_empty") else ""
+    return text + (f" {NOT_CONVERGED}" if row.get("not_converged") else "")
 
 
 def _cells(df: pd.DataFrame, bold: tuple[str, str]) -> tuple[list[str], list[list[str]]]:
@@ -244,6 +248,9 @@ def _cells(df: pd.DataFrame, bold: tuple[str, str]) -> tuple[list[str], list[lis
         cells = ["–" if row[c] is None or (isinstance(row[c], float) and math.isnan(row[c])) else str(row[c])
                  for c in labels] + [_n_cell(row)]
         for m in metrics:
+            if row.get("not_converged") and registry[m].penalty is not None:
+                cells.append("–")  # a penalty, not a measurement (table.csv keeps it)
+                continue
             text = _fmt(row[f"{m}_mean"], row[f"{m}_std"], registry[m].scale)
             cells.append(f"{bold[0]}{text}{bold[1]}" if mark[m][i] == "best" else
                          f"{text} {TIE}" if mark[m][i] == "tie" else text)
@@ -263,6 +270,10 @@ def _footnotes(df: pd.DataFrame) -> list[str]:
         lines.append(f"{INCOMPLETE} fewer ok runs than the fullest row: its mean is over the ok runs only.")
     if "n_empty" in df and (df["n_empty"] > 0).any():
         lines.append("(k empty): k runs gave an empty reconstruction; their geometry metrics are the defined penalty.")
+    if "not_converged" in df and df["not_converged"].astype(bool).any():
+        lines.append(f"{NOT_CONVERGED}: every run's reconstruction was empty, so the row is not a method result: its "
+                     "geometry cells are blank (table.csv keeps the penalty), it is not ranked, and its steps and "
+                     "epochs columns say how much it was trained.")
     for _, row in df[df["n_failed"] > 0].iterrows():
         lines.append(f"Failed ({row['model']}, {row['shape']}): {row['errors']}")
     return lines
