@@ -24,6 +24,7 @@ import pandas as pd
 
 from ddfbench import plugins
 from ddfbench.metric_registry import objective_value
+from ddfbench.report.__main__ import code_commits
 from ddfbench.runs import find_records
 from ddfbench.tune import search_space
 
@@ -40,8 +41,8 @@ def trials(records: list[dict[str, Any]]) -> pd.DataFrame:
         space = search_space(model)
         drawn = dict(o.split("=", 1) for o in rec.get("overrides") or [] if o.split("=", 1)[0] in space)
         fit = rec.get("fit") or {}
-        rows.append({"model": model, "kind": "trial" if drawn else "preset", **drawn, "objective": objective_value(rec, OBJECTIVE) * SCALE,
-                     "status": rec.get("status"), "steps": fit.get("steps"),
+        rows.append({"model": model, "kind": "trial" if drawn else "preset", **drawn,
+                     "objective": objective_value(rec, OBJECTIVE) * SCALE, "status": rec.get("status"), "steps": fit.get("steps"),
                      "fit_s": (rec.get("cost") or {}).get("fit_s"),
                      "max_seconds": ((rec.get("config") or {}).get("train") or {}).get("max_seconds")})
     df = pd.DataFrame(rows)
@@ -61,7 +62,7 @@ def _preset_value(model: str, path: str) -> Any:
 def provenance(records: list[dict[str, Any]], records_dir: str) -> str:
     """One line: how many records, from where, which code commits, threads and CPU they ran with."""
     env = [r.get("env") or {} for r in records]
-    commits = sorted({str(e.get("code_sha") or e.get("git_sha"))[:7] for e in env})
+    commits = [sha[:7] for sha in code_commits(records)]
     threads = sorted({str(e.get("threads")) for e in env})
     cpus = sorted({str(e.get("cpu")) for e in env})
     return (f"{len(records)} records from `{records_dir}` (code {', '.join(commits)}; threads {', '.join(threads)}; "
