@@ -61,7 +61,7 @@ def test_the_convergence_sweep_is_every_learned_family_on_bunny_and_bone_with_th
     models = plugins.members("model", "convergence")
     family = {m: plugins.plugin_yaml("model", m)["family"] for m in models}
     assert set(family.values()) == set(learned_families())  # every learned family, and only those
-    assert {"ddf", "ddf_paper", "neural_sdf", "gan_sdf"} <= set(models)
+    assert {"ddf_tuned", "ddf_paper_lr", "neural_sdf_tuned", "gan_sdf_tuned"} <= set(models)  # the tuned presets
     assert {(s["model"], s["shape"], s["seed"]) for s in swept} == {
         (m, sh, str(seed)) for m in models for sh in ("bunny", "bone") for seed in range(3)}
     assert len({j.key for j in jobs}) == len(models) * 6

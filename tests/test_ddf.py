@@ -320,3 +320,18 @@ def test_paper_lr_preset_is_the_paper_preset_but_for_its_named_deviations():
     about_runs = {"fit_steps", "experiments"}
     assert {k for k in paper if paper[k] != trainable.get(k)} - about_runs == {"lr", "batch"}
     assert trainable.keys() == paper.keys()
+
+
+@pytest.mark.parametrize("loss", ["clamp", "squish"])
+def test_squish_losses_agree_near_the_surface_and_only_the_clamp_dies_above_delta(loss):
+    """Eq. 8's clamp and Eq. 6's tanh squish give the same loss for distances well below delta, but a
+    prediction above delta gets no gradient from the clamp (where ddf_paper_lr's runs stalled) and a
+    pull back from the squish."""
+    from ddfbench.models.ddf.fit import SQUISH
+
+    delta = 1.0
+    y = torch.tensor([0.01, 0.02, 0.05])
+    assert torch.allclose(SQUISH[loss](y, delta), y, rtol=1e-3)
+    pred = torch.tensor([2.0], requires_grad=True)
+    (SQUISH[loss](pred, delta) - SQUISH[loss](torch.tensor([0.1]), delta)).abs().sum().backward()
+    assert (pred.grad.item() > 0) == (loss == "squish")

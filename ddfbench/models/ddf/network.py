@@ -13,7 +13,7 @@ from ddfbench.errors import InputError
 from ddfbench.geometry import FourierFeatures
 
 _CHOICES = {"activation": ("relu", "softplus"), "direction": ("vector", "angles"), "param": ("point", "ray"),
-            "visibility": ("head", "clamp"), "loss": ("l1", "clamp"), "storage_dtype": ("float32", "float16"),
+            "visibility": ("head", "clamp"), "loss": ("l1", "clamp", "squish"), "storage_dtype": ("float32", "float16"),
             "mesh_field": ("signed", "udf")}
 
 
@@ -32,11 +32,11 @@ def checked_config(cfg: Mapping[str, Any]) -> dict[str, Any]:
     for key in ("mesh_band", "mesh_lipschitz"):
         if not float(out[key]) > 0:
             raise InputError(f"model.{key} {out[key]}: must be > 0")
-    if out["loss"] == "clamp" or out["visibility"] == "clamp":
+    if out["loss"] != "l1" or out["visibility"] == "clamp":
         if not float(out["delta"]) > 0:
-            raise InputError(f"model.delta {out['delta']}: must be > 0 for the clamp loss")
-    if out["visibility"] == "clamp" and out["loss"] != "clamp":
-        raise InputError("model.visibility 'clamp' needs model.loss 'clamp' (misses are learned as delta)")
+            raise InputError(f"model.delta {out['delta']}: must be > 0 for the {out['loss']} loss")
+    if out["visibility"] == "clamp" and out["loss"] == "l1":
+        raise InputError("model.visibility 'clamp' needs model.loss 'clamp' or 'squish' (misses are learned as delta)")
     return out
 
 
