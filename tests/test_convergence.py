@@ -61,7 +61,22 @@ def test_the_convergence_sweep_is_every_learned_family_on_bunny_and_bone_with_th
     models = plugins.members("model", "convergence")
     family = {m: plugins.plugin_yaml("model", m)["family"] for m in models}
     assert set(family.values()) == set(learned_families())  # every learned family, and only those
-    assert {"ddf_tuned", "ddf_paper_lr", "neural_sdf_tuned", "gan_sdf_tuned"} <= set(models)  # the tuned presets
+    assert set(models) == {"ddf_tuned", "neural_sdf_tuned", "gan_sdf_tuned"}  # each family at its tuned values
     assert {(s["model"], s["shape"], s["seed"]) for s in swept} == {
         (m, sh, str(seed)) for m in models for sh in ("bunny", "bone") for seed in range(3)}
     assert len({j.key for j in jobs}) == len(models) * 6
+
+
+def test_paper_ddf_is_both_paper_presets_on_every_shape_at_ten_minutes():
+    from hydra import compose, initialize_config_dir
+
+    from ddfbench import CONF_DIR
+    from ddfbench.report.status import expected_grid
+
+    jobs, _ = expected_grid("/nonexistent/paper_ddf", ["+experiment=paper_ddf"])
+    swept = {tuple(sorted(dict(o.split("=", 1) for o in j.swept).items())) for j in jobs}
+    assert swept == {(("model", m), ("seed", str(s)), ("shape", sh)) for m in ("ddf_paper", "ddf_paper_lr")
+                     for sh in ("bunny", "airplane", "cow", "bone") for s in range(3)}
+    with initialize_config_dir(CONF_DIR, version_base="1.3"):
+        train = compose("config", overrides=["+experiment=paper_ddf"]).train
+    assert (train.budget, train.max_seconds) == ("wall-clock", 600)  # labelled: "does it train in 10 minutes"

@@ -309,7 +309,7 @@ def test_bad_config_and_samples_raise_input_errors(sphere_oracle):
 
 
 def test_paper_lr_preset_is_the_paper_preset_but_for_its_named_deviations():
-    """conf/model/ddf_paper_lr.yaml changes only what its comment names (lr, batch); ddf_paper stays as written.
+    """conf/model/ddf_paper_lr.yaml changes only what its comment names (lr, batch, loss); ddf_paper stays as written.
     (Its fit_steps budget and the experiments it joins are about the runs, not the model.)"""
     from hydra import compose, initialize_config_dir
 
@@ -318,20 +318,23 @@ def test_paper_lr_preset_is_the_paper_preset_but_for_its_named_deviations():
         trainable = OmegaConf.to_container(compose(config_name="ddf_paper_lr"))
     assert paper["lr"] == 1e-7 and trainable["lr"] == 1e-4
     about_runs = {"fit_steps", "experiments"}
-    assert {k for k in paper if paper[k] != trainable.get(k)} - about_runs == {"lr", "batch"}
+    assert {k for k in paper if paper[k] != trainable.get(k)} - about_runs == {"lr", "batch", "loss"}
     assert trainable.keys() == paper.keys()
 
 
-@pytest.mark.parametrize("loss", ["clamp", "squish"])
-def test_squish_losses_agree_near_the_surface_and_only_the_clamp_dies_above_delta(loss):
-    """Eq. 8's clamp and Eq. 6's tanh squish give the same loss for distances well below delta, but a
-    prediction above delta gets no gradient from the clamp (where ddf_paper_lr's runs stalled) and a
-    pull back from the squish."""
-    from ddfbench.models.ddf.fit import SQUISH
+@pytest.mark.parametrize("mode", ["clamp", "clamp_misses"])
+def test_clamp_loss_only_the_printed_clamp_drops_a_near_hit_predicted_beyond_delta(mode):
+    """Eq. 8 as printed gives no gradient to any prediction beyond delta (where ddf_paper_lr's fits sat at
+    the all-miss loss); clamp_misses still pulls a near hit back. Both leave a miss beyond delta alone and
+    agree wherever the prediction is below delta."""
+    from ddfbench.models.ddf.fit import clamp_loss
 
-    delta = 1.0
-    y = torch.tensor([0.01, 0.02, 0.05])
-    assert torch.allclose(SQUISH[loss](y, delta), y, rtol=1e-3)
-    pred = torch.tensor([2.0], requires_grad=True)
-    (SQUISH[loss](pred, delta) - SQUISH[loss](torch.tensor([0.1]), delta)).abs().sum().backward()
-    assert (pred.grad.item() > 0) == (loss == "squish")
+    pred = torch.tensor([2.0, 2.0, 0.3, 0.5], requires_grad=True)
+    t = torch.tensor([0.1, 0.0, 0.2, 0.0])
+    hit = torch.tensor([True, False, True, False])
+    loss = clamp_loss(pred, t, hit, 1.0, mode)
+    assert torch.allclose(loss[2:], torch.tensor([0.1, 0.5]))
+    loss.sum().backward()
+    assert pred.grad[1] == 0 and (pred.grad[0] > 0) == (mode == "clamp_misses")
+    assert torch.equal(pred.grad[2:], torch.tensor([1.0, -1.0]))
+

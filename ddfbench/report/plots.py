@@ -44,6 +44,7 @@ PLOTS_BY_EXPERIMENT: dict[str, tuple[str, ...]] = {
     "pareto": ("pareto", "fit_curves"),
     "smoke": ("fit_curves", "pareto", "sampling", "render_time", "ablation"),
     "convergence": ("convergence", "fit_curves"),
+    "paper_ddf": ("convergence", "fit_curves"),
     "render_matched": ("render_time",),
     "tune": ("fit_curves",),  # plus reports/tune/tune.png by ddfbench.report.tune
 }

@@ -1,7 +1,7 @@
 """`python -m ddfbench.report.regenerate [--only E1,E2] [--results DIR] [--reports DIR] [-- OVERRIDE ...]`
 
 Regenerates the committed reports: for each experiment (default: tune, ablation, sampling, representations,
-storage, render_time, render_matched, pareto, convergence) runs `python -m ddfbench +experiment=<e> out_dir=<results> [OVERRIDE ...]`
+storage, render_time, render_matched, pareto, convergence, paper_ddf) runs `python -m ddfbench +experiment=<e> out_dir=<results> [OVERRIDE ...]`
 (tune: once per model that declares a search space, report by ddfbench.report.tune)
 (finished runs are skipped, so an interrupted regeneration resumes), then writes
 `python -m ddfbench.report <results>/<e> --out <reports>/<e>` (render_matched: `python -m
@@ -28,7 +28,7 @@ from ddfbench.report import tune as tune_report
 from ddfbench.report.claims import write_claims
 
 EXPERIMENTS = ("tune", "ablation", "sampling", "representations", "storage", "render_time", "render_matched", "pareto",
-               "convergence")
+               "convergence", "paper_ddf")
 
 
 def sweep_commands(experiment: str, results: str, overrides: list[str]) -> list[list[str]]:

@@ -26,7 +26,7 @@ cfg keys (conf/model/ddf.yaml documents each):
             (positional-encoding octaves; 0 = raw input)
   heads     visibility ("head": a logit trained with cross entropy | "clamp": no head,
             hit where the clamped distance stays below clamp_hit_ratio * delta, as in the paper)
-  loss      loss ("l1" | "clamp" | "squish": tanh, with delta), vis_weight, entry_share (share of each batch drawn
+  loss      loss ("l1" | "clamp" | "clamp_misses", with delta: ddfbench.models.ddf.fit.clamp_loss), vis_weight, entry_share (share of each batch drawn
             from line_entry_labels of up to MAX_ENTRY_LINES sample lines, visibility only, half hits
             and half misses; none unless the samples carry line_hit and it has both), batch, lr, weight_decay,
             lr_schedule / lr_final_ratio / lr_warmup (ddfbench.train.Schedule), grad_clip

@@ -18,12 +18,16 @@ from ddfbench.train import Schedule, seed_everything, train_loop
 MAX_ENTRY_LINES = 1 << 22  # sample lines drawn (seeded) for the entry labels: 4M lines, 100 MB
 
 
-# The paper's squish functions sigma(y) of distances y (N,) with bound delta: Eq. 8's clamp, whose gradient
-# is zero above delta, and Eq. 6's strictly increasing kind (tanh), whose gradient never vanishes.
-SQUISH = {
-    "clamp": lambda y, delta: y.clamp(max=delta),
-    "squish": lambda y, delta: delta * torch.tanh(y / delta),
-}
+def clamp_loss(pred: torch.Tensor, t: torch.Tensor, hit: torch.Tensor, delta: float, mode: str) -> torch.Tensor:
+    """The paper's Eq. 8 per sample, |clamp(y, delta) - clamp(y_hat, delta)|, misses labelled delta; pred, t,
+    hit (N,), distances in unit-cube units. mode "clamp": as printed, so a prediction beyond delta gets no
+    gradient whatever its label; "clamp_misses": the prediction is clamped only where the label is delta
+    (misses, far hits), so a near hit predicted beyond delta is still pulled back."""
+    target = torch.where(hit, t.clamp(max=delta), delta)
+    clamped = pred.clamp(max=delta)
+    if mode == "clamp_misses":
+        clamped = torch.where(hit & (t < delta), pred, clamped)
+    return (clamped - target).abs()
 
 
 def line_entry_labels(x: np.ndarray, d: np.ndarray, line_hit: np.ndarray, half: float,
@@ -74,10 +78,8 @@ def fit(rep: Representation, data: FitData, budget: Budget, probe: Probe | None 
                        torch.randint(n_hit_entries, max(len(he), n_hit_entries + 1), (half,), device=dev, generator=gen)])
         pred, logit = rep.net(torch.cat([x[i], xe[j]]), torch.cat([d[i], de[j]]))
         pred, h = pred[:n_main], hit[i]
-        if cfg["loss"] in SQUISH:  # |squish(y) - squish(y_hat)|, misses labelled squish(inf) = delta
-            squish = SQUISH[cfg["loss"]]
-            target = torch.where(h, squish(t[i], delta), delta)
-            dist_loss = (squish(pred, delta) - target).abs()
+        if cfg["loss"] != "l1":
+            dist_loss = clamp_loss(pred, t[i], h, delta, cfg["loss"])
             dist_loss = dist_loss.mean() if logit is None else dist_loss[h].sum() / h.sum().clamp_min(1)
         else:
             dist_loss = (pred - t[i]).abs()[h].sum() / h.sum().clamp_min(1)

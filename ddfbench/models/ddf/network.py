@@ -13,7 +13,7 @@ from ddfbench.errors import InputError
 from ddfbench.geometry import FourierFeatures
 
 _CHOICES = {"activation": ("relu", "softplus"), "direction": ("vector", "angles"), "param": ("point", "ray"),
-            "visibility": ("head", "clamp"), "loss": ("l1", "clamp", "squish"), "storage_dtype": ("float32", "float16"),
+            "visibility": ("head", "clamp"), "loss": ("l1", "clamp", "clamp_misses"), "storage_dtype": ("float32", "float16"),
             "mesh_field": ("signed", "udf")}
 
 
@@ -36,7 +36,7 @@ def checked_config(cfg: Mapping[str, Any]) -> dict[str, Any]:
         if not float(out["delta"]) > 0:
             raise InputError(f"model.delta {out['delta']}: must be > 0 for the {out['loss']} loss")
     if out["visibility"] == "clamp" and out["loss"] == "l1":
-        raise InputError("model.visibility 'clamp' needs model.loss 'clamp' or 'squish' (misses are learned as delta)")
+        raise InputError("model.visibility 'clamp' needs model.loss 'clamp' or 'clamp_misses' (misses are learned as delta)")
     return out
 
 
