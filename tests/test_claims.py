@@ -45,18 +45,18 @@ def representations(ddf_ratio, sdf=1e-4):
     """The DDF at ddf_ratio x the neural SDF's chamfer on every shape."""
     out = []
     for shape in ("bunny", "cow"):
-        out += [rec("representations", "ddf", s, jitter(s, ddf_ratio * sdf), shape=shape,
+        out += [rec("representations", claims.DDF, s, jitter(s, ddf_ratio * sdf), shape=shape, family="ddf",
                     cost={"fit_s": 40.0, "n_params": 6e4}) for s in SEEDS]
-        out += [rec("representations", "neural_sdf", s, jitter(s, sdf), shape=shape, cost={"fit_s": 40.0, "n_params": 9e4})
-                for s in SEEDS]
+        out += [rec("representations", claims.SDF, s, jitter(s, sdf), shape=shape, family="neural_sdf",
+                    cost={"fit_s": 40.0, "n_params": 9e4}) for s in SEEDS]
     return out
 
 
 def render_time(device):
     out = []
-    for model, t in (("ddf", 0.08), ("neural_sdf", 0.6), ("mesh", 0.006)):
+    for model, family, t in ((claims.DDF, "ddf", 0.08), (claims.SDF, "neural_sdf", 0.6), ("mesh", "mesh", 0.006)):
         out += [rec("render_time", model, s, 1e-5, scene={"width": 64}, cost={"render_warm_s": jitter(s, t)},
-                    device=device) for s in SEEDS]
+                    family=family, device=device) for s in SEEDS]
     return out
 
 
@@ -83,10 +83,10 @@ def test_every_claim_has_a_row_with_a_verdict():
     assert v["s_p matters more than s_fc"] == v["s_p matters more than s_dr"] == claims.CONFIRMED
     assert v["s_fc matters more than s_dr (paper's text)"] == claims.CONFIRMED
     assert v["surface beats pov at equal counts"] == v["pov beats random at equal counts"] == claims.CONFIRMED
-    assert v["ddf: bunny chamfer at most the paper's 0.589×10³"] == claims.CONFIRMED
-    assert v["ddf_paper: bunny chamfer at most the paper's 0.589×10³"] == claims.NO_RECORDS
+    assert v[f"{claims.DDF}: bunny chamfer at most the paper's 0.589×10³"] == claims.CONFIRMED
+    assert v["ddf_paper: bunny chamfer at most the paper's 0.589×10³"] == claims.NO_RECORDS  # no paper_ddf records
     assert v["DDF as accurate as the neural SDF"] == claims.REFUTED  # 3x worse
-    assert v["DDF renders faster than neural_sdf"] == v["DDF renders faster than mesh"] == claims.NOT_TESTABLE
+    assert v[f"DDF renders faster than {claims.SDF}"] == v["DDF renders faster than mesh"] == claims.NOT_TESTABLE
     assert v["the generator G stores in ~47 KB"] == v["G < mesh < grid SDF in storage"] == claims.CONFIRMED
     assert v["GAN more accurate than CNN on 2D SDFs"] == claims.NOT_TESTABLE
     assert set(verdicts({}).values()) == {claims.NO_RECORDS, claims.NOT_TESTABLE}
@@ -99,11 +99,13 @@ def test_every_claim_has_a_row_with_a_verdict():
      claims.CONFIRMED, claims.NOT_SEPARABLE),
     ({"sampling": sampling({"surface": 5e-4, "pov": 3e-4, "random": 9e-4})}, "surface beats pov at equal counts",
      claims.CONFIRMED, claims.REFUTED),
-    ({"representations": representations(9.0)}, "ddf: bunny chamfer at most the paper's 0.589×10³",
+    ({"representations": representations(9.0)}, f"{claims.DDF}: bunny chamfer at most the paper's 0.589×10³",
      claims.CONFIRMED, claims.REFUTED),
+    ({"paper_ddf": [rec("paper_ddf", "ddf_paper_lr", s, jitter(s, 0.3e-3), family="ddf") for s in SEEDS]},
+     "ddf_paper_lr: bunny chamfer at most the paper's 0.589×10³", claims.NO_RECORDS, claims.CONFIRMED),
     ({"representations": representations(1.05)}, "DDF as accurate as the neural SDF", claims.REFUTED,
      claims.CONFIRMED),
-    ({"render_time": render_time("cuda")}, "DDF renders faster than neural_sdf", claims.NOT_TESTABLE, claims.CONFIRMED),
+    ({"render_time": render_time("cuda")}, f"DDF renders faster than {claims.SDF}", claims.NOT_TESTABLE, claims.CONFIRMED),
     ({"render_time": render_time("cuda")}, "DDF renders faster than mesh", claims.NOT_TESTABLE, claims.REFUTED),
     ({"storage": storage(2e6)}, "G < mesh < grid SDF in storage", claims.CONFIRMED, claims.REFUTED),
 ])
@@ -128,7 +130,7 @@ def render_matched(loose_warm_s, device="cuda"):
     """neural_sdf with a loose tracer: depth error 0.015 (below the DDF's 0.02) at loose_warm_s."""
     out = []
     for s in SEEDS:
-        r = rec("render_matched", "neural_sdf", s, 1e-4, scene={"width": 64, "height": 64},
+        r = rec("render_matched", claims.SDF, s, 1e-4, scene={"width": 64, "height": 64}, family="neural_sdf",
                 cost={"render_warm_s": loose_warm_s}, device=device)
         r["metrics"]["depth_mae"], r["config"]["model"] = 0.015, {"trace": {"eps_abs": 3e-3}}
         out.append(r)
@@ -139,7 +141,7 @@ def test_matched_depth_error_row_follows_the_loosened_tracer():
     times = render_time("cuda")
     for r in times:
         r["scene"]["height"] = 64
-        r["metrics"]["depth_mae"] = {"ddf": 0.02, "neural_sdf": 0.001, "mesh": 0.0}[r["model"]]
+        r["metrics"]["depth_mae"] = {claims.DDF: 0.02, claims.SDF: 0.001, "mesh": 0.0}[r["model"]]
         if r["model"] == "mesh":
             r["cost"]["render_warm_s"] = 0.5  # slower than the DDF here: the verdict hangs on the neural SDF
     claim = "DDF renders faster at matched depth error"
@@ -148,3 +150,20 @@ def test_matched_depth_error_row_follows_the_loosened_tracer():
     for r in times:
         r["env"]["device"] = "cpu"
     assert verdicts(records(render_time=times, render_matched=render_matched(0.2, "cpu")))[claim] == claims.NOT_TESTABLE
+
+
+def test_the_models_the_claims_compare_are_those_the_experiments_run():
+    """claims.DDF / claims.SDF and the render_matched reference name the presets representations and
+    render_time sweep (a renamed or dropped preset would leave the claims without records)."""
+    from hydra import compose, initialize_config_dir
+
+    from ddfbench import CONF_DIR, plugins
+    from ddfbench.report import matched
+
+    for experiment in ("representations", "render_time"):
+        assert {claims.DDF, claims.SDF} <= set(plugins.members("model", experiment)), experiment
+    assert matched.REFERENCE == claims.DDF and "mesh" in plugins.members("model", "render_time")
+    assert {"ddf_paper", "ddf_paper_lr"} == set(plugins.members("model", "paper_ddf"))
+    with initialize_config_dir(CONF_DIR, version_base="1.3"):
+        cfg = compose("config", overrides=["+experiment=render_matched"], return_hydra_config=True)
+    assert claims.SDF in str(cfg.hydra.sweeper.params.model).split(",")

@@ -304,6 +304,10 @@ def test_bad_config_and_samples_raise_input_errors(sphere_oracle):
         DDF({"mesh_field": "points"})
     with pytest.raises(InputError):
         DDF({"visibility": "clamp", "loss": "l1"})
+    for delta in (0.0, float("inf")):
+        with pytest.raises(InputError, match="model.delta"):
+            DDF({"visibility": "clamp", "loss": "clamp_misses", "delta": delta})
+    assert DDF({"visibility": "clamp", "loss": "clamp_misses", "delta": 0.5}).cfg["loss"] == "clamp_misses"
     with pytest.raises(InputError):
         DDF(SMALL).fit(FitData(Samples(x=np.zeros((4, 3), np.float32)), mesh, oracle), Budget(max_steps=1))
 
@@ -329,12 +333,12 @@ def test_clamp_loss_only_the_printed_clamp_drops_a_near_hit_predicted_beyond_del
     agree wherever the prediction is below delta."""
     from ddfbench.models.ddf.fit import clamp_loss
 
-    pred = torch.tensor([2.0, 2.0, 0.3, 0.5], requires_grad=True)
-    t = torch.tensor([0.1, 0.0, 0.2, 0.0])
-    hit = torch.tensor([True, False, True, False])
+    # near hit beyond delta, miss beyond delta, far hit (t >= delta) beyond delta, near hit, miss below delta
+    pred = torch.tensor([2.0, 2.0, 2.0, 0.3, 0.5], requires_grad=True)
+    t = torch.tensor([0.1, 0.0, 1.5, 0.2, 0.0])
+    hit = torch.tensor([True, False, True, True, False])
     loss = clamp_loss(pred, t, hit, 1.0, mode)
-    assert torch.allclose(loss[2:], torch.tensor([0.1, 0.5]))
+    assert torch.allclose(loss, torch.tensor([1.9 if mode == "clamp_misses" else 0.9, 0.0, 0.0, 0.1, 0.5]))
     loss.sum().backward()
-    assert pred.grad[1] == 0 and (pred.grad[0] > 0) == (mode == "clamp_misses")
-    assert torch.equal(pred.grad[2:], torch.tensor([1.0, -1.0]))
-
+    assert pred.grad[1] == pred.grad[2] == 0 and (pred.grad[0] > 0) == (mode == "clamp_misses")
+    assert torch.equal(pred.grad[3:], torch.tensor([1.0, -1.0]))

@@ -17,7 +17,7 @@ def rec(model, family, depth_mae, warm_s, seed=0, trace=None, width=64):
 def records(sdf_loose_error):
     out = []
     for seed in (0, 1, 2):
-        out.append(rec("ddf", "ddf", 2e-3, 0.1, seed))
+        out.append(rec(matched.REFERENCE, "ddf", 2e-3, 0.1, seed))
         out.append(rec("ddf_paper", "ddf", 9e-3, 0.3, seed))  # another DDF preset: not a candidate
         out.append(rec("neural_sdf", "neural_sdf", 1e-3, 0.5, seed))  # default tracer
         out.append(rec("neural_sdf", "neural_sdf", 1.8e-3, 0.2, seed, {"eps_abs": 1e-3}))
@@ -52,6 +52,12 @@ def test_no_setting_as_accurate_is_not_reached():
     assert not rows["mesh"]["matched_reached"] and rows["mesh"]["matched_setting"] == "mesh_lod500"
     assert math.isnan(rows["mesh"]["default_speedup"])  # the full mesh was not run
     assert matched.NOT_REACHED in matched.to_markdown(matched.matched_table(recs))
+
+
+def test_a_tuned_preset_with_its_tracer_untouched_is_its_familys_default():
+    recs = [{**r, "model": "neural_sdf_tuned"} if r["model"] == "neural_sdf" else r for r in records(5e-3)]
+    sdf = by_family(matched.matched_table(recs))["neural_sdf"]
+    assert sdf["default_setting"] == "neural_sdf_tuned" and sdf["default_speedup"] == pytest.approx(5.0)
 
 
 def test_sizes_are_compared_only_with_their_own_size():

@@ -21,7 +21,8 @@ from tests.hard_cases.conftest import assert_well_formed, unit
 
 SMALL = {"width": 32, "depth": 2, "pos_freqs": 2, "dir_freqs": 1, "batch": 64, "eval_batch": 8192,
          "udf_directions": 8, "mesh_directions": 8}
-PRESETS = {"engineered": {}, "paper clamp": {"loss": "clamp", "visibility": "clamp", "delta": 0.5}}
+PRESETS = {"engineered": {}, "paper clamp": {"loss": "clamp", "visibility": "clamp", "delta": 0.5},
+           "clamp on misses": {"loss": "clamp_misses", "visibility": "clamp", "delta": 0.5}}
 D = 2 * 0.6 * np.sqrt(3.0)
 RADII = [0.005, 0.01, 0.02]
 

@@ -1,5 +1,6 @@
 """Training the DDF: its labels (the samples' rays, plus exact visibility labels where their lines enter
-the box) and the fit loop (distance loss on hits, l1 or the paper's clamp; visibility cross entropy).
+the box) and the fit loop (l1 on hits with a visibility head's cross entropy, or the paper's clamp loss over all
+samples: clamp_loss).
 """
 
 from __future__ import annotations

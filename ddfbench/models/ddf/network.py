@@ -32,11 +32,10 @@ def checked_config(cfg: Mapping[str, Any]) -> dict[str, Any]:
     for key in ("mesh_band", "mesh_lipschitz"):
         if not float(out[key]) > 0:
             raise InputError(f"model.{key} {out[key]}: must be > 0")
-    if out["loss"] != "l1" or out["visibility"] == "clamp":
-        if not float(out["delta"]) > 0:
-            raise InputError(f"model.delta {out['delta']}: must be > 0 for the {out['loss']} loss")
     if out["visibility"] == "clamp" and out["loss"] == "l1":
         raise InputError("model.visibility 'clamp' needs model.loss 'clamp' or 'clamp_misses' (misses are learned as delta)")
+    if out["loss"] != "l1" and not (math.isfinite(float(out["delta"])) and float(out["delta"]) > 0):
+        raise InputError(f"model.delta {out['delta']}: must be finite and > 0 for the {out['loss']} loss")
     return out
 
 
