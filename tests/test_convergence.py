@@ -51,6 +51,7 @@ def test_report_writes_the_band_plot_and_the_time_to_floor_table(tmp_path):
     assert "Time to reach the noise floor" in (out / "report.md").read_text()
 
 
+@pytest.mark.slow  # expands the sweep (~0.2 s a job)
 def test_the_convergence_sweep_is_every_learned_family_on_bunny_and_bone_with_three_seeds():
     from ddfbench import plugins
     from ddfbench.models import learned_families
@@ -67,6 +68,7 @@ def test_the_convergence_sweep_is_every_learned_family_on_bunny_and_bone_with_th
     assert len({j.key for j in jobs}) == len(models) * 6
 
 
+@pytest.mark.slow  # expands the sweep (~0.2 s a job)
 def test_paper_ddf_is_both_paper_presets_on_every_shape_at_ten_minutes():
     from hydra import compose, initialize_config_dir
 

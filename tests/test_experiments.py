@@ -47,7 +47,7 @@ LARGE = pytest.mark.slow  # composing a job's config takes ~0.2 s: grids of 80+ 
 
 @pytest.mark.parametrize("experiment,n_jobs", [
     ("ablation", lambda: 7 * 3), pytest.param("ablation_grid", lambda: 27 * 3, marks=LARGE),  # x 3 seeds
-    ("sampling", lambda: 4 * n_members("sampling", "sampling") * 3),                 # levels xs s m l
+    pytest.param("sampling", lambda: 4 * n_members("sampling", "sampling") * 3, marks=LARGE),  # levels xs s m l
     pytest.param("representations", lambda: 4 * n_members("model", "representations") * 5, marks=LARGE),
     pytest.param("storage", lambda: 4 * n_members("model", "storage") * 3, marks=LARGE),
     pytest.param("pareto", lambda: 4 * n_members("model", "pareto") * 3, marks=LARGE),

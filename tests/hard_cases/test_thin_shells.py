@@ -84,6 +84,7 @@ def test_grid_sdf_thin_plates(record_property, resolution):
     report(record_property, f"grid_sdf R={resolution}", rows)
 
 
+@pytest.mark.slow  # a fit per family (7-8 s each): the full suite runs it
 @pytest.mark.parametrize("family", [f for f in LEARNED if has_family(f)])
 def test_learned_families_thin_plates(record_property, family):
     rows = {}
