@@ -4,7 +4,9 @@ A plugin is one module plus one YAML, conf/<group>/<name>.yaml. The YAML is the 
 plugin's defaults (a preset such as ddf_paper names its family and overrides some of them). Besides its
 config it may carry `experiments`: the experiments the plugin joins and, per experiment, its levels,
 each a partial config merged onto the job's config when the experiment sets the group's level key
-(`capacity` for a model, `sample_size` for a sampler). Experiments name their sweep lists as
+(`capacity` for a model, `sample_size` for a sampler); `{levels_of: <other>}` in place of a level table
+takes the levels that config <other> of the group declares for the experiment, so two presets of one
+family share one table. Experiments name their sweep lists as
 `${members:model,pareto}`, so "every family" is every YAML that joins, and nothing else keeps a list.
 """
 
@@ -23,6 +25,7 @@ from ddfbench.errors import InputError
 META_KEY = "experiments"  # the part of a plugin's YAML that is about experiments, not its config
 LEVEL_KEYS = {"model": "capacity", "sampling": "sample_size"}  # group -> the job key that picks a level
 NAME_KEYS = {"model": "family", "sampling": "strategy"}  # group -> the key naming the implementing module
+LEVELS_OF = "levels_of"  # experiments.<experiment>: {levels_of: <config>}: that config's levels there
 
 
 @functools.lru_cache(maxsize=None)
@@ -51,7 +54,26 @@ def members(group: str, experiment: str) -> list[str]:
 
 def levels(group: str, name: str, experiment: str) -> dict[str, Any]:
     """{level: partial config} that config `name` declares for `experiment` ({} when it names none)."""
-    return dict((plugin_yaml(group, name).get(META_KEY) or {}).get(experiment) or {})
+    table = (plugin_yaml(group, name).get(META_KEY) or {}).get(experiment)
+    return _level_table(group, f"conf/{group}/{name}.yaml", experiment, table)
+
+
+def _level_table(group: str, label: str, experiment: str, table: Any) -> dict[str, Any]:
+    """`table` as a dict, or, where it is {levels_of: other}, the table `other` itself declares there
+    (label: where the table is, for the error message)."""
+    table = dict(table or {})
+    if LEVELS_OF not in table:
+        return table
+    other = table[LEVELS_OF]
+    where = f"{label}: {META_KEY}.{experiment}.{LEVELS_OF}={other!r}"
+    if len(table) > 1 or not isinstance(other, str):
+        raise InputError(f"{where}: must be the entry's only key and name a {group} config")
+    if other not in names(group):
+        raise InputError(f"{where}: no such {group} config (available: {', '.join(names(group))})")
+    found = dict((plugin_yaml(group, other).get(META_KEY) or {}).get(experiment) or {})
+    if not found or LEVELS_OF in found:
+        raise InputError(f"{where}: {other} declares no levels of its own for {experiment}")
+    return found
 
 
 def defaults(group: str, name: str) -> dict[str, Any]:
@@ -128,7 +150,7 @@ def job_config(cfg: Mapping[str, Any]) -> dict[str, Any]:
         level = out.get(level_key)
         if level is None:
             continue
-        table = meta.get(experiment) or {}
+        table = _level_table(group, f"{group} {node.get(NAME_KEYS[group])}", experiment, meta.get(experiment))
         if level not in table:
             raise InputError(f"{level_key}={level}: {group} {node.get(NAME_KEYS[group])} has no such level for "
                              f"experiment {experiment} (its levels: {', '.join(table) or 'none'})")

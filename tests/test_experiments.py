@@ -85,8 +85,10 @@ def test_the_built_in_plugins_join_the_documented_experiments():
     assert SAMPLERS == set(plugins.members("sampling", "sampling")) == {"random", "pov", "surface"}
     assert set(plugins.members("model", "default")) == {"mesh", "mesh_lod2000", "mesh_lod500", "grid_sdf",
                                                         "neural_sdf", "ddf"}
+    # the capacity sweeps take the tuned presets and the papers' presets as written, not the hand-set ones
     for experiment in ("storage", "pareto"):
-        assert set(plugins.members("model", experiment)) == FAMILIES
+        assert set(plugins.members("model", experiment)) == {"mesh", "grid_sdf", "ddf_tuned", "ddf_paper",
+                                                              "neural_sdf_tuned", "gan_sdf_tuned", "gan_sdf"}
 
 
 def test_capacity_sweeps_cover_every_registered_model(tmp_path):
@@ -97,17 +99,34 @@ def test_capacity_sweeps_cover_every_registered_model(tmp_path):
 
 def test_a_level_is_a_partial_config_merged_onto_the_job():
     base = {"experiment_name": "pareto", "capacity": "c2", "train": {"max_seconds": 45, "max_steps": 9},
-            "model": plugins.plugin_yaml("model", "ddf"), "sampling": plugins.plugin_yaml("sampling", "random")}
+            "model": plugins.plugin_yaml("model", "ddf_tuned"), "sampling": plugins.plugin_yaml("sampling", "random")}
     job = plugins.job_config(base)
     assert (job["model"]["width"], job["model"]["depth"]) == (128, 4) and "experiments" not in job["model"]
+    assert job["model"]["lr"] == base["model"]["lr"]  # the preset's own values stay
     assert "experiments" not in job["sampling"] and job["train"] == base["train"]
     with pytest.raises(InputError, match="capacity=c9: model ddf has no such level for experiment pareto"):
         plugins.job_config({**base, "capacity": "c9"})
 
 
+def test_levels_of_takes_another_configs_levels_and_refuses_a_bad_reference():
+    """gan_sdf (the thesis) shares gan_sdf_tuned's fit budgets: {levels_of: gan_sdf_tuned} in its YAML."""
+    for experiment in ("pareto", "storage"):
+        shared = plugins.levels("model", "gan_sdf_tuned", experiment)
+        assert shared and plugins.levels("model", "gan_sdf", experiment) == shared
+    thesis = {"experiment_name": "storage", "capacity": "c4", "model": plugins.plugin_yaml("model", "gan_sdf")}
+    assert plugins.job_config(thesis)["train"]["max_steps"] == shared["c4"]["train"]["max_steps"]
+    bad = [("mesh_lod500", "no levels of its own for pareto"),  # a preset with no pareto table
+           ("gan_sdf", "no levels of its own for pareto"),  # a reference to a reference
+           ("nosuch", "no such model config"), (3, "must be the entry's only key")]
+    for other, why in bad:
+        model = {**thesis["model"], "experiments": {"pareto": {"levels_of": other}}}
+        with pytest.raises(InputError, match=f"model gan_sdf: experiments.pareto.levels_of=.*: .*{why}"):
+            plugins.job_config({**thesis, "experiment_name": "pareto", "model": model})
+
+
 @pytest.mark.parametrize("experiment", ["storage", "pareto"])
 def test_gan_sdf_levels_set_its_fit_steps_and_others_keep_their_models(experiment):
-    """gan_sdf's network is fixed: its capacity level is train.max_steps, taken from the level's row."""
+    """The GAN's network is fixed: its capacity level is train.max_steps, taken from the level's row."""
     from hydra import compose, initialize_config_dir
 
     from omegaconf import OmegaConf
@@ -117,10 +136,10 @@ def test_gan_sdf_levels_set_its_fit_steps_and_others_keep_their_models(experimen
             cfg = compose("config", overrides=[f"+experiment={experiment}", f"model={family}", f"capacity={level}"])
             return plugins.job_config(OmegaConf.to_container(cfg, resolve=True))
         levels = ("c1", "c2", "c3", "c4")
-        gan = {lv: composed("gan_sdf", lv) for lv in levels}
-        ddf = {(c := composed("ddf", lv))["train"]["max_steps"]: c["model"]["fit_steps"] for lv in levels}
+        gan = {lv: composed("gan_sdf_tuned", lv) for lv in levels}
+        ddf = {(c := composed("ddf_tuned", lv))["train"]["max_steps"]: c["model"]["fit_steps"] for lv in levels}
     budgets = [gan[lv]["train"]["max_steps"] for lv in levels]
-    assert budgets == [plugins.levels("model", "gan_sdf", experiment)[lv]["train"]["max_steps"] for lv in levels]
+    assert budgets == [plugins.levels("model", "gan_sdf_tuned", experiment)[lv]["train"]["max_steps"] for lv in levels]
     assert len(set(budgets)) == 4 and len(ddf) == 1  # the bug this guards against: one budget for all levels
     assert list(ddf.items())[0][0] == list(ddf.items())[0][1]  # other families: their model's fit_steps
 

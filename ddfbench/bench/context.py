@@ -21,9 +21,9 @@ def preset(group: str, name: str, **overrides: Any) -> dict[str, Any]:
     return {**OmegaConf.to_container(root, resolve=True)["node"], **overrides}
 
 
-def model_preset(family: str, **overrides: Any) -> dict[str, Any]:
-    """conf/model/<family>.yaml with overrides."""
-    return preset("model", family, **overrides)
+def model_preset(name: str, **overrides: Any) -> dict[str, Any]:
+    """conf/model/<name>.yaml (a family, or a preset naming its family) with overrides."""
+    return preset("model", name, **overrides)
 
 
 @dataclass

@@ -3,7 +3,7 @@ in the same process, each speed with its accuracy against the oracle beside it (
 claim, measured where it is about: `--device cuda`).
 
 Contestants, all answering first-hit depth (no normals) for the same rays:
-- DDF (conf/model/ddf.yaml, trained `fit_seconds`): ddfbench.ddf_infer.DDFDepth on the device in fp32,
+- DDF (conf/model/ddf_tuned.yaml, the preset the experiments compare, trained `fit_seconds`): ddfbench.ddf_infer.DDFDepth on the device in fp32,
   bf16 autocast and bf16 compiled (torch.compile; only with `compile: true`); beside it the bare
   network forward on the same box-entry points (what answering has to cost at least);
 - Warp BVH (ddfbench.warp_cast) on the same device, rays already there;
@@ -44,6 +44,7 @@ from ddfbench.sampling import surface
 
 SPEED_GOAL = Target(">=", 1e9, on="value")  # compiled bf16 DDF rays/s at 1M+ rays on an H100/H200 (issue 17)
 BARE_SHARE = Target(">=", 0.8)  # compiled bf16 DDF against the bare bf16 forward of the same network
+DDF_PRESET = "ddf_tuned"  # the DDF of representations, render_time and pareto
 
 
 def accuracy(t: np.ndarray, t_ref: np.ndarray) -> dict[str, float]:
@@ -55,14 +56,15 @@ def accuracy(t: np.ndarray, t_ref: np.ndarray) -> dict[str, float]:
 
 
 def pareto_ddf_capacities() -> dict[str, dict]:
-    """The DDF's pareto levels (conf/model/ddf.yaml, experiments.pareto): {"c1": model overrides, ...}."""
-    return {level: dict(part.get("model") or {}) for level, part in plugins.levels("model", "ddf", "pareto").items()}
+    """The DDF's pareto levels (its YAML's experiments.pareto): {"c1": model overrides, ...}."""
+    levels = plugins.levels("model", DDF_PRESET, "pareto")
+    return {level: dict(part.get("model") or {}) for level, part in levels.items()}
 
 
 def train_ddf(ctx: Context, samples, overrides: dict) -> tuple[DDF, dict]:
     s = ctx.sizes
     shape, oracle = ctx.shape(s["shape"]), ctx.oracle(s["shape"])
-    rep = DDF(model_preset("ddf", **overrides))
+    rep = DDF(model_preset(DDF_PRESET, **overrides))
     stats = rep.fit(FitData(samples, shape.mesh, oracle),
                     Budget(max_steps=10**9, max_seconds=float(s["fit_seconds"]), device=ctx.device, n_probes=0))
     return rep, {"fit_steps": stats.steps, "fit_seconds": stats.seconds, "fit_status": stats.status,

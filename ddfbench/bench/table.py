@@ -8,7 +8,8 @@ import os
 from typing import Any
 
 
-def _num(v: float) -> str:
+def number(v: float) -> str:
+    """A figure for a table: 3 significant digits, or exponent notation below 1e-3."""
     if v is None or not math.isfinite(v):
         return str(v)
     return f"{v:.3g}" if abs(v) >= 1e-3 or v == 0 else f"{v:.2e}"
@@ -37,8 +38,8 @@ def to_markdown(doc: dict[str, Any]) -> str:
                   "note |", "|---|---|---|---|---|---|---|---|---|---|"]
         for r in sec["rows"]:
             met = "" if r["met"] is None else ("yes" if r["met"] else "**no**")
-            lines.append(f"| {r['measure']} | {_num(r['value'])} {r['unit']} | {r['reference']} | "
-                         f"{_num(r['reference_value'])} | {_num(r['ratio'])} | {r['target'] or ''} | {met} | "
+            lines.append(f"| {r['measure']} | {number(r['value'])} {r['unit']} | {r['reference']} | "
+                         f"{number(r['reference_value'])} | {number(r['ratio'])} | {r['target'] or ''} | {met} | "
                          f"{r['device']} | {r['precision']} | {r['note']} |")
         if sec["notes"]:
             lines += [""] + [f"- {note}" for note in sec["notes"]]
