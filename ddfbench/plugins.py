@@ -134,12 +134,13 @@ def _merge(into: dict[str, Any], part: Mapping[str, Any]) -> None:
             into[key] = copy.deepcopy(value)
 
 
-def job_config(cfg: Mapping[str, Any]) -> dict[str, Any]:
+def job_config(cfg: Mapping[str, Any], choices: Mapping[str, str] | None = None) -> dict[str, Any]:
     """A resolved job config with the levels it asks for applied and the plugins' experiments parts dropped.
 
     For each group whose level key is set (cfg.capacity for the model, cfg.sample_size for the
     sampler), the group's `experiments.<experiment_name>.<level>` (a partial config of the whole job)
-    is merged onto cfg. The record key is taken from what this returns.
+    is merged onto cfg. The record key is taken from what this returns. choices: Hydra's config-group
+    choices ({"model": "ddf_tuned", ...}), so that an error names the YAML; else it names the family.
     """
     out = copy.deepcopy(dict(cfg))
     experiment = str(out.get("experiment_name"))
@@ -150,10 +151,12 @@ def job_config(cfg: Mapping[str, Any]) -> dict[str, Any]:
         level = out.get(level_key)
         if level is None:
             continue
-        table = _level_table(group, f"{group} {node.get(NAME_KEYS[group])}", experiment, meta.get(experiment))
+        chosen = (choices or {}).get(group)
+        label = f"conf/{group}/{chosen}.yaml" if chosen else f"{group} {node.get(NAME_KEYS[group])}"
+        table = _level_table(group, label, experiment, meta.get(experiment))
         if level not in table:
-            raise InputError(f"{level_key}={level}: {group} {node.get(NAME_KEYS[group])} has no such level for "
-                             f"experiment {experiment} (its levels: {', '.join(table) or 'none'})")
+            raise InputError(f"{level_key}={level}: {label} has no such level for experiment {experiment} "
+                             f"(its levels: {', '.join(table) or 'none'})")
         parts.append(table[level] or {})
     for part in parts:
         _merge(out, part)

@@ -167,7 +167,11 @@ def run(cfg: Mapping[str, Any], choices: Mapping[str, str] | None = None,
     the launcher gives it (ddfbench.launch.job_device); None means train.device.
     """
     choices = dict(choices or {})
-    cfg = plugins.job_config(cfg)
+    try:
+        cfg, bad_level = plugins.job_config(cfg, choices), None
+    except InputError as exc:  # a level the model or sampler lacks: a failed record, keyed on the config as asked
+        asked = {k: cfg.get(k) for k in plugins.LEVEL_KEYS.values()}
+        cfg, bad_level = {**plugins.job_config({**cfg, **dict.fromkeys(asked)}), **asked}, exc
     experiment = str(cfg.get("experiment_name", "single"))
     key = runs.config_key(cfg)
     rdir = runs.run_dir(str(cfg.get("out_dir", "results")), experiment, key)
@@ -194,6 +198,8 @@ def run(cfg: Mapping[str, Any], choices: Mapping[str, str] | None = None,
     try:
         device = resolve_device(device or str(cfg.get("train", {}).get("device", "cpu")))
         out["env"] = runs.environment(device, threads)
+        if bad_level is not None:
+            raise bad_level
         seed_everything(seed)  # a reused worker process starts each run from the same state
         _stages(cfg, rdir, device, seed, out)
         out["status"] = "ok"

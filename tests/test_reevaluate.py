@@ -1,8 +1,10 @@
 """`python -m ddfbench.reevaluate`: a finished sweep measured again from its saved artifacts. At the
-record's own point count and seed it reproduces the record's geometry metrics (so it reads the right
-meshes with the right sampling); with a scene it renders each saved model; records stay unchanged."""
+record's own point count, seed and scene it reproduces the record's geometry and image metrics (so it
+reads the right meshes and loads the right networks); another point count is another measurement; an
+unreadable run is one line and the others are still written; records stay unchanged."""
 
 import json
+import os
 import subprocess
 import sys
 
@@ -12,41 +14,55 @@ import pytest
 from ddfbench.reevaluate import main
 from ddfbench.runs import find_records
 
-RUN = ["-m", "model=grid_sdf,mesh", "shape=sphere", "eval=smoke", "eval.n_points=2000", "eval.mesh_resolution=20",
-       "scene=none", "train.budget=steps", "threads=1", "quiet=true"]
+RUN = ["-m", "model=grid_sdf,neural_sdf", "shape=sphere", "eval=smoke", "eval.n_points=2000",
+       "eval.mesh_resolution=20", "scene=depth", "scene.width=24", "scene.height=24", "sampling=random",
+       "sampling.n_samples=2000", "train.budget=steps", "train.max_steps=15", "threads=1", "quiet=true"]
+
+
+def records(folder):
+    return {(r["model"], r["config"]["seed"]): r for r in find_records(str(folder))}
 
 
 @pytest.mark.slow
-def test_reevaluation_at_the_records_settings_reproduces_them_and_renders_the_saved_models(tmp_path, capsys):
+def test_reevaluation_at_the_records_settings_reproduces_them(tmp_path, capsys):
     done = subprocess.run([sys.executable, "-m", "ddfbench", *RUN, "seed=0,1", f"out_dir={tmp_path}"],
                           capture_output=True, text=True, timeout=600)
     assert done.returncode == 0, done.stderr[-2000:]
-    recs = {(r["model"], r["config"]["seed"]): r for r in find_records(str(tmp_path / "single"))}
+    recs = records(tmp_path / "single")
+    assert len(recs) == 4 and all(r["status"] == "ok" for r in recs.values())
     before = {k: json.dumps(r, sort_keys=True, default=str) for k, r in recs.items()}
-    assert main([str(tmp_path / "single"), "--out", str(tmp_path / "re"), "--n-points", "2000", "--scene", "depth",
-                 "--threads", "1"]) == 0
-    rows = pd.read_csv(tmp_path / "re" / "reevaluated.csv")
-    assert len(rows) == 4
-    for _, row in rows.iterrows():
+    scene = ["--scene", "record", "--threads", "1"]  # each run's own 24x24 depth scene
+    assert main([str(tmp_path / "single"), "--out", str(tmp_path / "re"), "--n-points", "2000", *scene]) == 0
+    runs = pd.read_csv(tmp_path / "re" / "runs.csv")
+    assert len(runs) == 4 and set(runs["model"]) == {"grid_sdf", "neural_sdf"}
+    for _, row in runs.iterrows():
         m = recs[row["model"], row["seed"]]["metrics"]
         # the PLY round trip stores float32 vertices: equal to float32 precision, not bitwise
         assert row["chamfer_l2"] == pytest.approx(m["chamfer_l2"], rel=1e-5)
-        assert row["f@0.01"] == pytest.approx(m["fscore"]["0.01"], abs=1e-9)
-        assert row["floor_chamfer_l2"] == pytest.approx(m["noise_floor"]["chamfer_l2"], rel=1e-5)
-        assert 0.95 <= row["mask_iou"] <= 1.0 and 0.0 <= row["depth_mae"] < 0.01
-    full = rows[rows["model"] == "mesh"]
-    assert (full["mask_iou"] == 1.0).all() and (full["depth_mae"] == 0.0).all()  # the mesh against its own BVH
-    # another point count is another measurement
+        assert row["fscore@0.01"] == pytest.approx(m["fscore"]["0.01"], abs=1e-9)
+        assert row["noise_floor_chamfer_l2"] == pytest.approx(m["noise_floor"]["chamfer_l2"], rel=1e-5)
+        # rendered again from the saved network / grid on the same cameras: the image metrics of the run
+        assert row["mask_iou"] == pytest.approx(m["mask_iou"], abs=1e-9) and 0.5 < row["mask_iou"]
+        assert row["depth_mae"] == pytest.approx(m["depth_mae"], rel=1e-4)
+    # the depth scene file (64x64) is another measurement of the same models
+    assert main([str(tmp_path / "single"), "--out", str(tmp_path / "re64"), "--n-points", "2000", "--scene", "depth",
+                 "--threads", "1"]) == 0
+    assert (pd.read_csv(tmp_path / "re64" / "runs.csv")["depth_mae"].values != runs["depth_mae"].values).any()
+    table = pd.read_csv(tmp_path / "re" / "table.csv")
+    assert set(table.loc[table["n"] == 2, "model"]) == {"grid_sdf", "neural_sdf"}
+    # another point count is another measurement, and without a scene there are no image metrics
     assert main([str(tmp_path / "single"), "--out", str(tmp_path / "re5"), "--n-points", "500"]) == 0
-    other = pd.read_csv(tmp_path / "re5" / "reevaluated.csv")
-    assert "mask_iou" not in other and (other["n_points"] == 500).all()
-    assert not (other.sort_values("key")["chamfer_l2"].values == rows.sort_values("key")["chamfer_l2"].values).all()
-    summary = (tmp_path / "re" / "reevaluated.md").read_text()
-    assert "| grid_sdf | sphere | 2 (0) |" in summary and "| mesh | sphere | 2 (0) |" in summary
-    after = {(r["model"], r["config"]["seed"]): json.dumps(r, sort_keys=True, default=str)
-             for r in find_records(str(tmp_path / "single"))}
-    assert after == before
+    other = pd.read_csv(tmp_path / "re5" / "runs.csv").set_index("key")
+    assert other["mask_iou"].isna().all()
+    assert (other["chamfer_l2"] != runs.set_index("key").loc[other.index, "chamfer_l2"]).all()
+    assert records(tmp_path / "single") and {k: json.dumps(r, sort_keys=True, default=str)
+                                             for k, r in records(tmp_path / "single").items()} == before
+    # a run whose model file is gone: one line naming its folder, the other runs still written, exit 1
+    gone = recs["neural_sdf", 1]
+    os.remove(os.path.join(gone["_dir"], gone["artifacts"]["model"]))
     capsys.readouterr()
+    assert main([str(tmp_path / "single"), "--out", str(tmp_path / "re_gone"), "--n-points", "500", *scene]) == 1
+    err = [line for line in capsys.readouterr().err.splitlines() if line.startswith("ddfbench.reevaluate")]
+    assert len(err) == 1 and gone["_dir"] in err[0] and "no model artifact" in err[0]
+    assert len(pd.read_csv(tmp_path / "re_gone" / "runs.csv")) == 3
     assert main([str(tmp_path / "nothing"), "--out", str(tmp_path / "x")]) == 2
-    err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "nothing: no finished run records" in err[0]

@@ -1,17 +1,20 @@
-"""python -m ddfbench.bench.compare --before A.json [A2.json ...] --after B.json [B2.json ...] [--out F.md]
+"""python -m ddfbench.bench.compare --before A.json A2.json [...] --after B.json B2.json [...] [--out F.md]
 
 Did a change move the benchmark? Bench JSON files of the code before and after (at least two runs of
-each, interleaved on one idle host) are compared row by row on their same-process ratios: the
-run-to-run noise of a row is the range of its ratio over the runs of one code, and a row is "within
-noise" when the change of its mean ratio is no larger than the larger of the two codes' ranges: the
+each, interleaved on one idle host, same device, sizes and threads) are compared row by row. A row's
+run-to-run noise is the range (max - min) of a quantity over the runs of one code, and the row is
+"within noise" when the change of its mean is no larger than the larger of the two codes' ranges: the
 code moved it no more than running the same code again did. (Overlapping ranges would be too strict a
 test: two runs of each code, all four from one distribution, fail to overlap one time in three.)
+Each row is judged on its same-process ratio and on its own figure: a ratio can move because its
+reference did while the figure stayed.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 from dataclasses import dataclass
 from typing import Sequence
@@ -19,87 +22,112 @@ from typing import Sequence
 from ddfbench.bench.table import number
 from ddfbench.errors import InputError
 
+SAME = (("options", "device"), ("options", "sizes"), ("env", "threads"))  # what every compared run must share
+
+
+def _mean(xs: Sequence[float]) -> float:
+    return sum(xs) / len(xs)
+
+
+def change(before: Sequence[float], after: Sequence[float]) -> float:
+    """mean(after) / mean(before) - 1 (NaN when the mean before is 0 or not finite)."""
+    b = _mean(before)
+    return _mean(after) / b - 1.0 if b and math.isfinite(b) else math.nan
+
+
+def within_noise(before: Sequence[float], after: Sequence[float]) -> bool:
+    """|mean(after) - mean(before)| <= the larger of the two codes' ranges (max - min)."""
+    noise = max(max(before) - min(before), max(after) - min(after))
+    return abs(_mean(after) - _mean(before)) <= noise
+
 
 @dataclass
 class Shift:
-    """One bench row over the runs: its ratios before and after, and what that says."""
+    """One bench row over the runs: its ratios and its figures (value) before and after."""
 
     section: str
     measure: str
-    before: list[float]
-    after: list[float]
-
-    @staticmethod
-    def _mean(xs: Sequence[float]) -> float:
-        return sum(xs) / len(xs)
-
-    @staticmethod
-    def spread(xs: Sequence[float]) -> float:
-        """(max - min) / mean of one code's ratios: its run-to-run noise (0 for a single run)."""
-        mean = sum(xs) / len(xs)
-        return (max(xs) - min(xs)) / abs(mean) if mean else 0.0
-
-    @property
-    def change(self) -> float:
-        """mean(after) / mean(before) - 1."""
-        return self._mean(self.after) / self._mean(self.before) - 1.0
-
-    @property
-    def within_noise(self) -> bool:
-        """|mean after - mean before| <= the larger of the two codes' ratio ranges (max - min)."""
-        noise = max(max(self.before) - min(self.before), max(self.after) - min(self.after))
-        return abs(self._mean(self.after) - self._mean(self.before)) <= noise
+    unit: str
+    ratio_before: list[float]
+    ratio_after: list[float]
+    value_before: list[float]
+    value_after: list[float]
 
 
-def ratios(path: str) -> dict[tuple[str, str], float]:
-    """{(section, measure): ratio} of one bench JSON file; InputError naming the file when it is not one."""
+def _load(path: str) -> dict:
     try:
         with open(path) as fh:
             doc = json.load(fh)
-        sections = doc["sections"]
-        return {(name, row["measure"]): float(row["ratio"])
-                for name, sec in sections.items() for row in sec["rows"]}
+        return {"rows": {(name, row["measure"]): row for name, sec in doc["sections"].items() for row in sec["rows"]},
+                "same": tuple(doc[a][b] for a, b in SAME)}
     except (OSError, ValueError, KeyError, TypeError) as err:
         raise InputError(f"{path}: not a ddfbench.bench JSON file ({type(err).__name__}: {err})") from None
 
 
 def shifts(before: Sequence[str], after: Sequence[str]) -> tuple[list[Shift], list[str]]:
-    """The rows every file holds, and the 'section: measure' names some file lacks."""
-    runs_b, runs_a = [ratios(p) for p in before], [ratios(p) for p in after]
-    runs = runs_b + runs_a
-    every = set.intersection(*(set(r) for r in runs))
-    some = set.union(*(set(r) for r in runs))
-    ordered = [key for key in runs_b[0] if key in every]
-    rows = [Shift(s, m, [r[(s, m)] for r in runs_b], [r[(s, m)] for r in runs_a]) for s, m in ordered]
-    return rows, sorted(f"{s}: {m}" for s, m in some - every)
+    """The rows every file holds, and the 'section: measure' names some file lacks. InputError unless
+    each side has two runs or more and every file shares device, sizes and threads."""
+    if len(before) < 2 or len(after) < 2:
+        raise InputError(f"--before {len(before)} / --after {len(after)} files: need two runs of each code "
+                         "(one run has no run-to-run noise to compare with)")
+    docs = {p: _load(p) for p in [*before, *after]}
+    kinds = {d["same"] for d in docs.values()}
+    if len(kinds) > 1:
+        raise InputError(f"the files differ in {'/'.join(b for _, b in SAME)}: {sorted(map(str, kinds))}")
+    runs = [docs[p]["rows"] for p in before], [docs[p]["rows"] for p in after]
+    every = set.intersection(*(set(r) for side in runs for r in side))
+    some = set.union(*(set(r) for side in runs for r in side))
+    out = []
+    for key in (k for k in runs[0][0] if k in every):
+        pick = lambda side, field: [float(r[key][field]) for r in side]  # noqa: E731
+        out.append(Shift(*key, runs[0][0][key]["unit"], pick(runs[0], "ratio"), pick(runs[1], "ratio"),
+                         pick(runs[0], "value"), pick(runs[1], "value")))
+    return out, sorted(f"{s}: {m}" for s, m in some - every)
+
+
+def _spread(xs: Sequence[float]) -> str:
+    mean = _mean(xs)
+    return f"{(max(xs) - min(xs)) / abs(mean):.0%}" if mean else "–"
+
+
+def _yes(ok: bool) -> str:
+    return "yes" if ok else "**no**"
 
 
 def to_markdown(rows: Sequence[Shift], missing: Sequence[str], before: Sequence[str], after: Sequence[str]) -> str:
-    n_out = sum(not r.within_noise for r in rows)
+    by_ratio = sum(within_noise(r.ratio_before, r.ratio_after) for r in rows)
+    by_value = sum(not within_noise(r.ratio_before, r.ratio_after) and within_noise(r.value_before, r.value_after)
+                   for r in rows)
     lines = [
         "# Bench before and after",
         "",
-        f"before: {', '.join(before)}; after: {', '.join(after)}. Ratios are each row's same-process ratio "
-        "(see the bench report); noise = (max - min) / mean over one code's runs; change = mean after / mean "
-        "before - 1; within noise = the mean moved no more than the larger of the two codes' ranges.",
+        f"before: {', '.join(before)}; after: {', '.join(after)}. ratio: each row's same-process ratio (see the "
+        "bench report); figure: the row's own value; noise: (max - min) / mean over one code's runs; change: "
+        "mean after / mean before - 1; within noise: the mean moved no more than the larger of the two "
+        "codes' ranges.",
         "",
-        f"{len(rows) - n_out} of {len(rows)} rows within noise.",
+        f"{by_ratio} of {len(rows)} rows within noise by their ratio; {by_value} more by their own figure "
+        "(the ratio moved with its reference).",
         "",
-        "| section | measure | ratios before | ratios after | noise before | noise after | change | within noise |",
-        "|---|---|---|---|---|---|---|---|",
+        "| section | measure | ratios before | ratios after | ratio noise before / after | ratio change | "
+        "ratio within noise | figures before | figures after | figure change | figure within noise |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
         lines.append(
-            f"| {r.section} | {r.measure} | {', '.join(number(x) for x in r.before)} | "
-            f"{', '.join(number(x) for x in r.after)} | {Shift.spread(r.before):.0%} | {Shift.spread(r.after):.0%} | "
-            f"{r.change:+.0%} | {'yes' if r.within_noise else '**no**'} |")
+            f"| {r.section} | {r.measure} | {', '.join(map(number, r.ratio_before))} | "
+            f"{', '.join(map(number, r.ratio_after))} | {_spread(r.ratio_before)} / {_spread(r.ratio_after)} | "
+            f"{change(r.ratio_before, r.ratio_after):+.0%} | {_yes(within_noise(r.ratio_before, r.ratio_after))} | "
+            f"{', '.join(map(number, r.value_before))} {r.unit} | {', '.join(map(number, r.value_after))} {r.unit} | "
+            f"{change(r.value_before, r.value_after):+.1%} | {_yes(within_noise(r.value_before, r.value_after))} |")
     if missing:
         lines += ["", "Rows not in every file: " + "; ".join(missing)]
     return "\n".join(lines) + "\n"
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m ddfbench.bench.compare", description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(prog="python -m ddfbench.bench.compare",
+                                 description="Bench runs of two codes compared row by row against their noise.")
     ap.add_argument("--before", nargs="+", required=True, help="bench JSON files of the code before")
     ap.add_argument("--after", nargs="+", required=True, help="bench JSON files of the code after")
     ap.add_argument("--out", default=None, help="also write the table to this .md file")

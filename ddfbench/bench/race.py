@@ -8,7 +8,7 @@ Contestants, all answering first-hit depth (no normals) for the same rays:
   network forward on the same box-entry points (what answering has to cost at least);
 - Warp BVH (ddfbench.warp_cast) on the same device, rays already there;
 - Embree on every CPU core (open3d RaycastingScene through the oracle, numpy rays on the host);
-- sphere tracing the neural SDF (trained `fit_seconds`) and a level-set grid SDF (`grid_resolution`),
+- sphere tracing the neural SDF (conf/model/neural_sdf_tuned.yaml, trained `fit_seconds`) and a level-set grid SDF (`grid_resolution`),
   through their intersect (numpy in and out: host transfers included).
 Ray sets: "primary" (one pinhole camera, `px`^2 rays) and "incoherent" (origins uniform in the field
 box, uniform directions). Then a sweep of incoherent ray counts (`sweep`: latency and throughput of the
@@ -45,6 +45,7 @@ from ddfbench.sampling import surface
 SPEED_GOAL = Target(">=", 1e9, on="value")  # compiled bf16 DDF rays/s at 1M+ rays on an H100/H200 (issue 17)
 BARE_SHARE = Target(">=", 0.8)  # compiled bf16 DDF against the bare bf16 forward of the same network
 DDF_PRESET = "ddf_tuned"  # the DDF of representations, render_time and pareto
+SDF_PRESET = "neural_sdf_tuned"  # the neural SDF beside it there
 
 
 def accuracy(t: np.ndarray, t_ref: np.ndarray) -> dict[str, float]:
@@ -121,7 +122,7 @@ def run(ctx: Context) -> SectionResult:
     result = SectionResult(details={"cpu_cores": os.cpu_count()})
     samples = surface.sample(shape, oracle, preset("sampling", "surface"), "rays", np.random.default_rng(0))[0]
     ddf, result.details["ddf"] = train_ddf(ctx, samples, dict(s.get("model") or {}))
-    nsdf, result.details["neural_sdf"] = neural_sdf(ctx)
+    nsdf, result.details["neural_sdf"] = neural_sdf(ctx, SDF_PRESET)
     gsdf, result.details["grid_sdf"] = grid_sdf(ctx)
     warp = WarpCaster(shape.mesh.vertices, shape.mesh.faces, ctx.device)
     chunk = int(s["chunk"])

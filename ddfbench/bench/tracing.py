@@ -44,10 +44,11 @@ def naive_trace(field: TorchField, origins: np.ndarray, directions: np.ndarray, 
     return torch.where(hit, t, torch.full_like(t, float("inf"))).numpy(), evals
 
 
-def neural_sdf(ctx: Context) -> tuple[NeuralSDF, dict]:
+def neural_sdf(ctx: Context, preset: str = "neural_sdf") -> tuple[NeuralSDF, dict]:
+    """conf/model/<preset>.yaml (sizes' `neural` overrides) fit `fit_seconds` on oracle SDF samples."""
     s = ctx.sizes
     shape, oracle = ctx.shape(s["shape"]), ctx.oracle(s["shape"])
-    rep = NeuralSDF(model_preset("neural_sdf", **dict(s.get("neural") or {})))
+    rep = NeuralSDF(model_preset(preset, **dict(s.get("neural") or {})))
     samples = oracle_sdf_samples(shape.mesh, oracle, int(s["n_samples"]), seed=0)
     stats = rep.fit(FitData(samples, shape.mesh, oracle),
                     Budget(max_steps=10**9, max_seconds=float(s["fit_seconds"]), device=ctx.device, n_probes=0))

@@ -246,6 +246,8 @@ def renders_faster_matched(records: Records, gpu: bool) -> list[Claim]:
 # ---------------------------------------------------------------- thesis
 
 def _storage(recs: list[dict[str, Any]], family: str, pick: Callable[[list[float]], float]) -> float:
+    """pick() of the storage bytes of the family's runs (every preset of it: the GAN presets share G's network,
+    the mesh family's LODs and levels are its sizes)."""
     vals = [by_name()["storage_bytes"].read(r) for r in _ok(recs) if r.get("family") == family]
     vals = [v for v in vals if math.isfinite(v)]
     return pick(vals) if vals else math.nan

@@ -112,9 +112,11 @@ def expected_grid(records_dir: str, overrides: list[str]) -> tuple[list[Job], st
             for job_overrides in batch:
                 cfg = loader.load_sweep_config(master, list(job_overrides))
                 HydraConfig.instance().set_config(cfg)  # as the job itself sees it
+                choices = dict(cfg.hydra.runtime.choices)
                 with open_dict(cfg):
                     del cfg["hydra"]
-                key = runs.config_key(plugins.job_config(OmegaConf.to_container(cfg, resolve=True)))  # type: ignore[arg-type]
+                plain = OmegaConf.to_container(cfg, resolve=True)
+                key = runs.config_key(plugins.job_config(plain, choices))  # type: ignore[arg-type]
                 jobs.append(Job([o for o in job_overrides if o.split("=", 1)[0] in swept], key))
     return jobs, source
 
