@@ -93,8 +93,9 @@ def test_the_built_in_plugins_join_the_documented_experiments():
 
 
 def test_capacity_sweeps_cover_every_registered_model(tmp_path):
-    for experiment in ("storage", "pareto", "smoke"):  # one seed: the model axis is what is checked
-        families = {swept(j)["model"] for j in grid(experiment, "seed=0")}
+    # one seed and one level: the model axis is what is checked (each job composed with its level applied)
+    for experiment, level in (("storage", "capacity=c4"), ("pareto", "capacity=c4"), ("smoke", "sampling=random")):
+        families = {swept(j)["model"] for j in grid(experiment, "seed=0", level)}
         assert families == set(plugins.members("model", experiment)), experiment
 
 
