@@ -233,3 +233,28 @@ def test_a_level_the_model_lacks_is_a_failed_record_with_one_line_not_a_crash(tm
     assert rec["error"] == ("capacity=c1: conf/model/ddf.yaml has no such level for experiment pareto "
                             "(its levels: none)")
     assert find_records(str(tmp_path)) and find_records(str(tmp_path))[0]["key"] == rec["key"]
+
+
+def test_model_keys_an_experiment_sweeps_are_keys_of_the_models_it_sweeps():
+    """A swept `model.<key>` must survive the strict model config of every model swept beside it
+    (render_matched sweeps model.trace.eps_abs and omega; a YAML without the key fails every job)."""
+    from hydra import compose, initialize_config_dir
+    from omegaconf import OmegaConf
+
+    checked = 0
+    for name in sorted(f[:-5] for f in os.listdir(os.path.join(CONF_DIR, "experiment")) if f.endswith(".yaml")):
+        params = OmegaConf.load(os.path.join(CONF_DIR, "experiment", f"{name}.yaml")).get("hydra", {})
+        params = dict(((params or {}).get("sweeper") or {}).get("params") or {})
+        keys = {k: str(v).split(",")[-1] for k, v in params.items() if k.lstrip("+").startswith("model.")}
+        if not keys:
+            continue
+        swept = str(params.get("model", ""))
+        models = plugins.members("model", name) if "members" in swept or not swept else swept.split(",")
+        with initialize_config_dir(CONF_DIR, version_base="1.3"):
+            for model in models:
+                cfg = compose("config", overrides=[f"+experiment={name}", f"model={model}",
+                                                   *(f"{k}={v}" for k, v in keys.items())])
+                plain = OmegaConf.to_container(cfg, resolve=True)
+                load_family(plain["model"]["family"]).configure(plain["model"])  # raises on an unknown key
+                checked += 1
+    assert checked >= 2  # render_matched: grid_sdf and neural_sdf_tuned
