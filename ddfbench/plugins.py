@@ -52,10 +52,14 @@ def members(group: str, experiment: str) -> list[str]:
     return [n for n in names(group) if experiment in (plugin_yaml(group, n).get(META_KEY) or {})]
 
 
+def _declared(group: str, name: str, experiment: str) -> Any:
+    """What config `name`'s YAML gives under experiments.<experiment> (None when it does not join)."""
+    return (plugin_yaml(group, name).get(META_KEY) or {}).get(experiment)
+
+
 def levels(group: str, name: str, experiment: str) -> dict[str, Any]:
     """{level: partial config} that config `name` declares for `experiment` ({} when it names none)."""
-    table = (plugin_yaml(group, name).get(META_KEY) or {}).get(experiment)
-    return _level_table(group, f"conf/{group}/{name}.yaml", experiment, table)
+    return _level_table(group, f"conf/{group}/{name}.yaml", experiment, _declared(group, name, experiment))
 
 
 def _level_table(group: str, label: str, experiment: str, table: Any) -> dict[str, Any]:
@@ -70,7 +74,7 @@ def _level_table(group: str, label: str, experiment: str, table: Any) -> dict[st
         raise InputError(f"{where}: must be the entry's only key and name a {group} config")
     if other not in names(group):
         raise InputError(f"{where}: no such {group} config (available: {', '.join(names(group))})")
-    found = dict((plugin_yaml(group, other).get(META_KEY) or {}).get(experiment) or {})
+    found = dict(_declared(group, other, experiment) or {})
     if not found or LEVELS_OF in found:
         raise InputError(f"{where}: {other} declares no levels of its own for {experiment}")
     return found

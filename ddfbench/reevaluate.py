@@ -32,7 +32,6 @@ from ddfbench.geometry import BOX_HALF
 from ddfbench.metrics import geometry_metrics
 from ddfbench.models import load_family
 from ddfbench.report import tables
-from ddfbench.representation import Budget, FitData
 from ddfbench.runs import find_records
 
 RECORD_SCENE = "record"  # --scene record: each run's own scene as its record gives it
@@ -56,15 +55,14 @@ def _reconstruction(rec: dict[str, Any]) -> trimesh.Trimesh:
 
 def _image_metrics(rec: dict[str, Any], gt: trimesh.Trimesh, scene: dict[str, Any]) -> dict[str, Any]:
     """The saved model rendered with `scene` against the GT mesh (render.render_scene's image metrics)."""
-    from ddfbench.render import render_scene  # the renderer's imports are only needed with a scene
+    from ddfbench.render import mesh_reference, render_scene  # the renderer's imports are only needed with a scene
 
     domain = float(rec["config"].get("domain", BOX_HALF))
     rep = load_family(rec["family"]).load(_artifact(rec, "model"), domain=domain)
-    reference = load_family("mesh")({"faces": 0}, domain=domain)
-    reference.fit(FitData(samples=None, mesh=gt, oracle=None), Budget())
     once = {**scene, "timing": {**(scene.get("timing") or {}), "repeats": 1, "warmup": 0}}
     with tempfile.TemporaryDirectory(prefix="ddfbench-reeval-") as tmp:
-        return render_scene(rep, reference, once, tmp, int(rec["config"].get("seed", 0))).get("metrics", {})
+        seed = int(rec["config"].get("seed", 0))
+        return render_scene(rep, mesh_reference(gt, domain), once, tmp, seed).get("metrics", {})
 
 
 def reevaluated(rec: dict[str, Any], n_points: int, scene: dict[str, Any] | str | None) -> dict[str, Any]:

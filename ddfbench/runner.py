@@ -139,11 +139,9 @@ def _stages(cfg: Mapping[str, Any], rdir: str, device: str, seed: int, out: dict
 
     scene = dict(cfg.get("scene") or {})
     if scene.get("outputs"):
-        from ddfbench.render import render_scene
+        from ddfbench.render import mesh_reference, render_scene
 
-        reference = load_family("mesh")({"faces": 0}, domain=domain)
-        reference.fit(FitData(samples=None, mesh=shape.mesh, oracle=oracle), budget)
-        result = render_scene(rep, reference, scene, rdir, seed)
+        result = render_scene(rep, mesh_reference(shape.mesh, domain, device), scene, rdir, seed)
         out["metrics"].update(result.get("metrics", {}))
         cost.update(result.get("cost", {}))
         out["counts"].update(result.get("counts", {}))

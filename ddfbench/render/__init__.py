@@ -28,9 +28,19 @@ from ddfbench.render.images import write_renders
 from ddfbench.render.integrator import Frames, render
 from ddfbench.render.scene import Scene, parse_scene, plan_passes
 from ddfbench.render.timing import RenderTiming, compute_threads, time_renders
-from ddfbench.representation import Representation
+from ddfbench.representation import Budget, FitData, Representation
 
-__all__ = ["render_scene", "render", "parse_scene", "plan_passes", "Frames", "Scene"]
+__all__ = ["render_scene", "render", "parse_scene", "plan_passes", "Frames", "Scene", "mesh_reference"]
+
+
+def mesh_reference(mesh, domain: float, device: str = "cpu") -> Representation:
+    """The full GT mesh (trimesh) as the mesh family, cast by its BVH on `device`: what render_scene compares
+    a family's frames with."""
+    from ddfbench.models import load_family
+
+    reference = load_family("mesh")({"faces": 0}, domain=domain)
+    reference.fit(FitData(samples=None, mesh=mesh, oracle=None), Budget(device=device))
+    return reference
 
 
 def _timed_render(rep: Representation, scene: Scene, seed: int) -> tuple[Frames, dict[str, int], RenderTiming]:
