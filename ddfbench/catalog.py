@@ -40,8 +40,14 @@ PYMESHLAB_SAMPLES = {
 }
 
 
+SAMPLES_ENV = "DDFBENCH_SAMPLE_MESHES"
+
+
 def pymeshlab_samples_dir() -> str:
-    """Folder of the sample meshes shipped inside the installed pymeshlab package."""
+    """Folder of the sample meshes shipped inside the installed pymeshlab package, or the folder that
+    $DDFBENCH_SAMPLE_MESHES names (a copy of it, for a machine without pymeshlab)."""
+    if os.environ.get(SAMPLES_ENV):
+        return os.environ[SAMPLES_ENV]
     import pymeshlab
 
     return os.path.join(os.path.dirname(pymeshlab.__file__), "tests", "sample_meshes")

@@ -1,22 +1,25 @@
 """Ground truth on the normalized mesh: first-hit distance, occupancy, signed distance, closest point.
 
 Backends: "open3d" (RaycastingScene, Embree inside; the default), "embree"
-(embreex through trimesh; ray casts only, for cross-checking) and "warp" (NVIDIA
-Warp's BVH on `device`, cpu or cuda; ray casts only; the optional `gpu` extra). Occupancy and
-signed distance always come from open3d: each point casts `occupancy_rays`
-random rays of its own and takes the majority of their odd-even parities, so a
-mesh with holes still gets a sensible inside test (a single ray would flip
-wherever it slips through a hole). Random directions almost never graze an
-edge, so the parities use open3d's raw crossing counts.
+(embreex through trimesh; first hits only, for cross-checking: its crossings, distances and
+inside tests come from open3d) and "warp" (NVIDIA Warp's BVH on `device`, cpu or cuda; the optional
+`gpu` extra), which answers every query itself, so a machine without open3d (a GPU machine
+where only small wheels can be installed) still has the whole oracle. open3d is imported only
+where it is used. The inside test: each point casts `occupancy_rays` random rays of its own and takes
+the majority of their odd-even parities, so a mesh with holes still gets a sensible answer (a single
+ray would flip wherever it slips through a hole). Random directions almost never graze an edge, so
+with open3d the parities use its raw intersection counts; Warp counts crossings.
 """
 
 from __future__ import annotations
 
-from typing import Iterator
+from typing import TYPE_CHECKING, Iterator
 
 import numpy as np
-import open3d as o3d
 import trimesh
+
+if TYPE_CHECKING:
+    import open3d as o3d
 
 _CHUNK = 1 << 22  # rays or points per backend call, caps temporary memory (~200 MB)
 
@@ -37,14 +40,16 @@ def _ray_chunks(origins: np.ndarray, directions: np.ndarray) -> Iterator[tuple[s
 
 def _tensor(a: np.ndarray) -> o3d.core.Tensor:
     """A zero-copy open3d view of a C-contiguous array (the tensor holds a reference to it)."""
+    import open3d as o3d
+
     return o3d.core.Tensor.from_numpy(np.ascontiguousarray(a))
 
 
 class Oracle:
     """Exact queries against a triangle mesh (N rays or points at a time, float32 results).
 
-    backend: "open3d", "embree" or "warp" for ray casts; occupancy_rays: votes per inside test (odd);
-    device: where the warp backend casts ("cpu" | "cuda"; the other backends run on the CPU).
+    backend: "open3d", "embree" (first hits; the rest open3d) or "warp" (every query); occupancy_rays:
+    votes per inside test (odd); device: where the warp backend runs ("cpu" | "cuda"; the others: CPU).
     """
 
     def __init__(self, mesh: trimesh.Trimesh, backend: str = "open3d", occupancy_rays: int = 5, device: str = "cpu"):
@@ -53,12 +58,8 @@ class Oracle:
         self.mesh = mesh
         self.backend = backend
         self.occupancy_rays = int(occupancy_rays) | 1
-        self._scene = o3d.t.geometry.RaycastingScene()
-        self._scene.add_triangles(
-            o3d.core.Tensor(_f32(mesh.vertices)), o3d.core.Tensor(np.ascontiguousarray(mesh.faces, dtype=np.uint32))
-        )
         self._face_normals = _f32(mesh.face_normals)
-        self._embree = self._warp = None
+        self._o3d_scene = self._embree = self._warp = None
         if backend == "warp":
             from ddfbench.warp_cast import WarpCaster
 
@@ -67,6 +68,17 @@ class Oracle:
             from trimesh.ray.ray_pyembree import RayMeshIntersector
 
             self._embree = RayMeshIntersector(mesh)
+
+    @property
+    def _scene(self):
+        """open3d's RaycastingScene of the mesh, built on first use (never with the warp backend)."""
+        if self._o3d_scene is None:
+            import open3d as o3d
+
+            self._o3d_scene = o3d.t.geometry.RaycastingScene()
+            self._o3d_scene.add_triangles(o3d.core.Tensor(_f32(self.mesh.vertices)),
+                                          o3d.core.Tensor(np.ascontiguousarray(self.mesh.faces, dtype=np.uint32)))
+        return self._o3d_scene
 
     # ---- rays -------------------------------------------------------------------------------
     def first_hit(self, origins: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -97,11 +109,13 @@ class Oracle:
             t, tri, normal = self._warp.cast(origins, directions)
             return t, tri, normal if normals else None
         if self._embree is None:
+            from open3d.t.geometry import RaycastingScene
+
             for sl, rays in _ray_chunks(origins, directions):
                 ans = self._scene.cast_rays(rays)
                 t[sl] = ans["t_hit"].numpy()  # inf on a miss
                 ids = ans["primitive_ids"].numpy()
-                tri[sl] = np.where(ids == o3d.t.geometry.RaycastingScene.INVALID_ID, -1, ids.astype(np.int64))
+                tri[sl] = np.where(ids == RaycastingScene.INVALID_ID, -1, ids.astype(np.int64))
                 if normals:
                     normal[sl] = ans["primitive_normals"].numpy()  # unit face normals, zeros on a miss
             return t, tri, normal
@@ -122,8 +136,11 @@ class Oracle:
         """Number of surface crossings along each ray (N,) int64.
 
         open3d lists every triangle a ray touches, so a ray through a shared edge or vertex would
-        count 2 to 6 times: hits on one ray whose t agree within 1e-6·(1 + t) are one crossing.
+        count 2 to 6 times: hits on one ray whose t agree within 1e-6·(1 + t) are one crossing (Warp
+        merges them the same way as it counts).
         """
+        if self._warp is not None:
+            return self._warp.count_crossings(origins, directions)
         out = np.zeros(len(np.reshape(origins, (-1, 3))), np.int64)
         for sl, rays in _ray_chunks(origins, directions):
             ans = self._scene.list_intersections(rays)
@@ -142,7 +159,9 @@ class Oracle:
 
     def any_hit(self, origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
         """Whether each ray (N,3),(N,3) meets the surface at all (N,) bool: open3d's occlusion test,
-        the cheapest query (stops at the first triangle found); always open3d, like count_crossings."""
+        the cheapest query (stops at the first triangle found), or Warp's first hit; embree uses open3d."""
+        if self._warp is not None:
+            return np.isfinite(self._warp.cast(origins, directions)[0])
         return np.concatenate([self._scene.test_occlusions(rays).numpy() for _, rays in _ray_chunks(origins, directions)]
                                or [np.zeros(0, bool)])
 
@@ -166,13 +185,23 @@ class Oracle:
             q = p[s : s + max(1, _CHUNK // k)]
             d = rng.normal(size=(len(q) * k, 3)).astype(np.float32)
             d /= np.linalg.norm(d, axis=1, keepdims=True)
-            odd = np.concatenate([self._scene.count_intersections(rays).numpy()
-                                  for _, rays in _ray_chunks(np.repeat(q, k, axis=0), d)]) % 2
+            odd = self._raw_crossings(np.repeat(q, k, axis=0), d) % 2
             votes[s : s + len(q)] = odd.reshape(len(q), k).sum(axis=1)
         return votes * 2 > k
 
+    def _raw_crossings(self, origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
+        """Crossing counts (N,) for the inside test's random rays: open3d's raw intersection counts
+        (cheaper than count_crossings; random directions almost never meet an edge) or Warp's."""
+        if self._warp is not None:
+            return self._warp.count_crossings(origins, directions)
+        return np.concatenate([self._scene.count_intersections(rays).numpy()
+                               for _, rays in _ray_chunks(origins, directions)] or [np.zeros(0, np.int64)])
+
     def unsigned_distance(self, points: np.ndarray) -> np.ndarray:
         """Exact distance to the surface (N,) float32."""
+        if self._warp is not None:
+            p = _f32(points).reshape(-1, 3)
+            return np.linalg.norm(self.closest_point(p)[0] - p, axis=1).astype(np.float32)
         return self._points(self._scene.compute_distance, points).astype(np.float32)
 
     def signed_distance(self, points: np.ndarray) -> np.ndarray:
@@ -182,6 +211,8 @@ class Oracle:
 
     def closest_point(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Closest surface point (N,3) float32 and its triangle id (N,) int64."""
+        if self._warp is not None:
+            return self._warp.closest_point(points)
         p = _f32(points).reshape(-1, 3)
         cps, ids = [], []
         for s in range(0, len(p), _CHUNK):

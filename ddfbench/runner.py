@@ -141,7 +141,8 @@ def _stages(cfg: Mapping[str, Any], rdir: str, device: str, seed: int, out: dict
     if scene.get("outputs"):
         from ddfbench.render import mesh_reference, render_scene
 
-        result = render_scene(rep, mesh_reference(shape.mesh, domain, device), scene, rdir, seed)
+        reference = mesh_reference(shape.mesh, domain, device, str(cfg.get("oracle", {}).get("backend", "open3d")))
+        result = render_scene(rep, reference, scene, rdir, seed)
         out["metrics"].update(result.get("metrics", {}))
         cost.update(result.get("cost", {}))
         out["counts"].update(result.get("counts", {}))

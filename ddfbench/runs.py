@@ -6,6 +6,7 @@ reader (or a run killed with SIGKILL) sees either no record or a complete one.
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 import math
@@ -13,6 +14,7 @@ import os
 import platform
 import socket
 import subprocess
+import sys
 import tempfile
 from typing import Any, Mapping
 
@@ -122,10 +124,32 @@ def _code_sha() -> str | None:
     return _git("log", "-1", "--format=%H", "--", *CODE_PATHS)
 
 
+OPTIONAL = ("open3d", "warp", "pymeshlab", "embreex")  # modules whose versions are recorded; a GPU machine may lack some
+
+
+def _installed(module: str) -> str | None:
+    """The version of `module` if it is imported, else of the installed distribution that provides it (e.g.
+    open3d-cpu for open3d); None where none does (or an import of it was blocked)."""
+    if module in sys.modules:
+        return getattr(sys.modules[module], "__version__", None)
+    from importlib import metadata
+
+    for dist in _providers().get(module, []):
+        return metadata.version(dist)
+    return None
+
+
+@functools.cache
+def _providers() -> dict[str, list[str]]:
+    """{top-level module: distributions that provide it} of this environment (one scan a process)."""
+    from importlib import metadata
+
+    return metadata.packages_distributions()
+
+
 def environment(device: str, threads: int) -> dict[str, Any]:
     """Where and with what the run was measured."""
     import numpy
-    import open3d
     import torch
     import trimesh
 
@@ -134,7 +158,7 @@ def environment(device: str, threads: int) -> dict[str, Any]:
         "git_sha": _git_sha(),
         "code_sha": _code_sha(),
         "versions": {"python": platform.python_version(), "torch": torch.__version__, "numpy": numpy.__version__,
-                     "trimesh": trimesh.__version__, "open3d": open3d.__version__},
+                     "trimesh": trimesh.__version__, **{name: _installed(name) for name in OPTIONAL}},
         "device": device,
         "threads": int(threads),
         "cpu": platform.processor() or platform.machine(),

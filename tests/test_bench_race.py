@@ -44,3 +44,29 @@ def test_race_sweep_and_capacities(race):
     assert list(caps) == ["c1", "c2", "c3", "c4"]
     assert [caps[c]["width"] for c in caps] == [64, 128, 256, 512]
 
+
+
+def test_race_on_a_machine_without_open3d_or_pymeshlab(tmp_path):
+    """A GPU machine gets only small wheels (no open3d, no pymeshlab): with --oracle-backend warp the race
+    runs there, every contestant but open3d's Embree answers, and the JSON says why that one is missing."""
+    import subprocess
+    import sys
+
+    script = ("import sys; sys.modules['open3d'] = None; sys.modules['pymeshlab'] = None\n"
+              "from ddfbench.bench.__main__ import main\n"
+              f"sys.exit(main(['--sizes', 'small', '--only', 'race', '--repeats', '1', '--warmup', '0', '--threads', '1',"
+              f" '--oracle-backend', 'warp', '--out', {str(tmp_path)!r}]))\n")
+    out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=600)
+    assert out.returncode == 0, out.stderr[-3000:]
+    doc = json.loads((tmp_path / "bench-cpu-small.json").read_text())
+    sec = doc["sections"]["race"]
+    assert sec["error"] is None and doc["options"]["oracle_backend"] == "warp"
+    assert doc["env"]["versions"]["open3d"] is None and doc["env"]["versions"]["warp"]  # blocked counts as absent
+    assert "not run" in sec["details"]["embree_all_cores"]
+    for set_name in ("primary", "incoherent"):
+        d = sec["details"][set_name]
+        assert "embree_all_cores" not in d
+        assert d["warp_bvh"]["mask_iou"] == 1.0 and d["warp_bvh"]["depth_mae"] == 0.0  # the oracle is Warp's caster
+        for name in ("ddf_fp32", "ddf_bf16", "neural_sdf_trace", "grid_sdf_trace"):
+            assert d[name]["rays_per_s"] > 0 and 0.0 <= d[name]["mask_iou"] <= 1.0, (set_name, name)
+    assert all("embree" not in r["reference"] for r in sec["rows"])

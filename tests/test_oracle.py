@@ -6,6 +6,9 @@ import pytest
 from ddfbench.oracle import Oracle
 from ddfbench.shapes import load_shape
 from tests.conftest import random_rays
+from tests.hard_cases.conftest import backend_params, has_warp
+
+ALL_QUERIES = backend_params("open3d", "warp")  # backends that answer every query themselves
 
 
 def test_backends_agree_on_random_rays(bunny, rng):
@@ -35,18 +38,19 @@ def test_first_hit_on_sphere_is_analytic(sphere, rng):
     assert np.allclose(np.linalg.norm(n, axis=1), 1, atol=1e-5)
 
 
-@pytest.mark.parametrize("backend", ["open3d", "embree"])
+@pytest.mark.parametrize("backend", backend_params("open3d", "embree", "warp"))
 def test_miss_is_inf(backend):
     box = load_shape({"name": "cube"})
     t, tri, n = Oracle(box.mesh, backend).first_hit(np.array([[2.0, 2.0, 2.0]]), np.array([[1.0, 0.0, 0.0]]))
     assert np.isinf(t[0]) and tri[0] == -1 and np.all(n[0] == 0)
 
 
+@pytest.mark.parametrize("backend", ALL_QUERIES)
 @pytest.mark.parametrize("name", ["sphere", "cube"])
-def test_signed_distance_analytic(name, rng):
+def test_signed_distance_analytic(name, backend, rng):
     shape = load_shape({"name": name})
     p = rng.uniform(-0.6, 0.6, (4000, 3))
-    sd = Oracle(shape.mesh).signed_distance(p)
+    sd = Oracle(shape.mesh, backend).signed_distance(p)
     if name == "sphere":
         exact = np.linalg.norm(p, axis=1) - 0.5
         tol = 3e-3
@@ -57,17 +61,19 @@ def test_signed_distance_analytic(name, rng):
     assert np.abs(sd - exact).max() < tol
 
 
-def test_occupancy_survives_a_hole():
+@pytest.mark.parametrize("backend", ALL_QUERIES)
+def test_occupancy_survives_a_hole(backend):
     open_box = load_shape({"name": "open_box"})
-    orc = Oracle(open_box.mesh, occupancy_rays=9)
+    orc = Oracle(open_box.mesh, backend, occupancy_rays=9)
     inside = np.array([[0.0, 0.0, 0.0], [0.2, -0.2, -0.3], [0.1, 0.3, 0.0]])
     outside = np.array([[0.0, 0.0, -0.55], [0.55, 0.0, 0.0], [0.0, 0.58, 0.2]])
     assert orc.occupancy(inside).all()
     assert not orc.occupancy(outside).any()
 
 
-def test_closest_point_and_crossings(sphere, rng):
-    orc = Oracle(sphere.mesh)
+@pytest.mark.parametrize("backend", ALL_QUERIES)
+def test_closest_point_and_crossings(sphere, backend, rng):
+    orc = Oracle(sphere.mesh, backend)
     p = rng.normal(size=(500, 3))
     cp, tri = orc.closest_point(p)
     assert np.abs(np.linalg.norm(cp, axis=1) - 0.5).max() < 3e-3
@@ -77,9 +83,10 @@ def test_closest_point_and_crossings(sphere, rng):
     assert list(orc.count_crossings(far, d)) == [2, 2, 0]
 
 
-def test_any_hit_agrees_with_first_hit(sphere, rng):
+@pytest.mark.parametrize("backend", ALL_QUERIES)
+def test_any_hit_agrees_with_first_hit(sphere, backend, rng):
     """any_hit is true exactly where a ray meets the sphere (rays from outside and inside, both ways)."""
-    orc = Oracle(sphere.mesh)
+    orc = Oracle(sphere.mesh, backend)
     o = rng.uniform(-0.9, 0.9, size=(4000, 3))
     d = rng.normal(size=(4000, 3))
     d /= np.linalg.norm(d, axis=1, keepdims=True)
@@ -101,3 +108,46 @@ def test_warp_backend_without_warp_names_the_install(monkeypatch):
     with pytest.raises(InputError, match=r'pip install -e "\.\[gpu\]"') as err:
         Oracle(load_shape({"name": "cube"}).mesh, "warp")
     assert "\n" not in str(err.value)
+
+
+@pytest.mark.skipif(not has_warp(), reason='NVIDIA Warp not installed (pip install -e ".[gpu]")')
+def test_warp_point_queries_and_crossings_equal_open3d_on_the_bunny(bunny, rng):
+    """Distances, inside tests and crossing counts through Warp equal open3d's on a scanned mesh; a closest
+    point may differ only where two surface points are equally near (same distance)."""
+    a, w = Oracle(bunny.mesh, "open3d"), Oracle(bunny.mesh, "warp")
+    p = rng.uniform(-0.55, 0.55, (5000, 3))
+    dist = a.unsigned_distance(p)
+    assert np.abs(w.unsigned_distance(p) - dist).max() < 1e-6
+    assert np.array_equal(w.occupancy(p, seed=4), a.occupancy(p, seed=4))
+    cp, tri = w.closest_point(p)
+    assert np.all(tri >= 0) and np.abs(np.linalg.norm(cp - p, axis=1) - dist).max() < 1e-6
+    o, d = random_rays(rng, 5000)
+    crossings = a.count_crossings(o, d)
+    assert crossings.max() >= 3 and np.array_equal(w.count_crossings(o, d), crossings)
+    assert np.array_equal(w.any_hit(o, d), a.any_hit(o, d))
+
+
+@pytest.mark.skipif(not has_warp(), reason='NVIDIA Warp not installed (pip install -e ".[gpu]")')
+def test_warp_oracle_needs_no_open3d(tmp_path):
+    """With open3d not importable (a GPU machine gets only small wheels), the warp oracle answers every query."""
+    import subprocess
+    import sys
+
+    script = (
+        "import sys; sys.modules['open3d'] = None\n"
+        "import numpy as np\n"
+        "from ddfbench.oracle import Oracle\n"
+        "from ddfbench.shapes import load_shape\n"
+        "orc = Oracle(load_shape({'name': 'sphere'}).mesh, 'warp')\n"
+        "p = np.array([[0.0, 0.0, 0.0], [0.9, 0.0, 0.0]]); d = np.array([[1.0, 0.0, 0.0]] * 2)\n"
+        "print(orc.signed_distance(p).astype(float).round(2).tolist(), orc.hit_distance(p, d).astype(float).round(2).tolist(),\n"
+        "      orc.count_crossings(p - [[1.0, 0, 0]], d).tolist(), orc.any_hit(p, d).tolist())\n"
+        "try:\n"
+        "    Oracle(orc.mesh, 'open3d').unsigned_distance(p)\n"
+        "except ImportError:\n"
+        "    print('open3d blocked')\n"
+    )
+    out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, cwd=tmp_path, timeout=300)
+    assert out.returncode == 0, out.stderr[-2000:]
+    lines = out.stdout.strip().splitlines()
+    assert lines[-2:] == ["[-0.5, 0.4] [0.5, inf] [2, 1] [True, False]", "open3d blocked"]

@@ -1,5 +1,7 @@
 """Loading, validation and normalization; every bad input gets a one-line error naming the file."""
 
+import os
+
 import numpy as np
 import pytest
 import trimesh
@@ -104,3 +106,24 @@ def test_catalog_resolves_from_installed_pymeshlab():
 def test_unknown_name_lists_catalog():
     with pytest.raises(InputError, match="unknown.*bunny"):
         load_shape({"name": "teapot"})
+
+
+def test_sample_meshes_from_a_copy_without_pymeshlab(tmp_path, monkeypatch):
+    """$DDFBENCH_SAMPLE_MESHES names a copy of the sample folder (a GPU machine gets no pymeshlab wheel): the
+    catalog reads from it, and the full-resolution mesh family needs no pymeshlab (only its LODs do)."""
+    import shutil
+    import sys
+
+    from ddfbench.catalog import SAMPLES_ENV, pymeshlab_samples_dir
+    from ddfbench.models.mesh import decimate
+
+    shutil.copy(os.path.join(pymeshlab_samples_dir(), PYMESHLAB_SAMPLES["bone"]), tmp_path / "bone.ply")
+    monkeypatch.setenv(SAMPLES_ENV, str(tmp_path))
+    monkeypatch.setitem(sys.modules, "pymeshlab", None)  # import pymeshlab -> ImportError
+    bone = load_shape({"name": "bone"})
+    assert bone.source == str(tmp_path / "bone.ply") and len(bone.mesh.faces) > 1000
+    assert decimate(bone.mesh, 0) is bone.mesh
+    with pytest.raises(ImportError):
+        decimate(bone.mesh, 500)
+    with pytest.raises(InputError, match="cow"):  # not in the copy: the usual one-line error naming the file
+        load_shape({"name": "cow"})

@@ -67,6 +67,8 @@ def main(argv: list[str] | None = None) -> int:
                     help="torch threads (0: torch's default); open3d and scipy use every core")
     ap.add_argument("--only", default=None, help="comma-separated sections to run (default: all; on a CPU device all "
                     f"but {', '.join(CUDA_ONLY_BY_DEFAULT)})")
+    ap.add_argument("--oracle-backend", default="open3d", choices=("open3d", "warp"),
+                    help="the ground truth's backend (warp: every query through Warp, for a machine without open3d)")
     ap.add_argument("--out", default=os.path.join("reports", "bench"), help="folder for the .md and .json")
     args = ap.parse_args(argv)
     try:
@@ -87,7 +89,7 @@ def main(argv: list[str] | None = None) -> int:
     load = round(os.getloadavg()[0], 2) if hasattr(os, "getloadavg") else None
     results: dict[str, SectionResult] = {}
     with tempfile.TemporaryDirectory(prefix="ddfbench-bench-") as workdir:
-        shared = Context(device, {}, args.repeats, args.warmup, workdir, threads)
+        shared = Context(device, {}, args.repeats, args.warmup, workdir, threads, oracle_backend=args.oracle_backend)
         for name in sections:
             print(f"[bench] {name} ...", file=sys.stderr, flush=True)
             shared.sizes = SIZES[args.sizes][name]
@@ -98,7 +100,7 @@ def main(argv: list[str] | None = None) -> int:
         "command": " ".join(["python -m ddfbench.bench", *(argv if argv is not None else sys.argv[1:])]),
         "started": started, "total_s": time.perf_counter() - t0, "load_average_start": load,
         "options": {"device": device, "sizes": args.sizes, "repeats": args.repeats, "warmup": args.warmup,
-                    "sections": sections},
+                    "sections": sections, "oracle_backend": args.oracle_backend},
         "env": environment(device, threads),
         "sizes": {name: SIZES[args.sizes][name] for name in sections},
         "sections": {name: r.as_dict() for name, r in results.items()},

@@ -29,7 +29,8 @@ def model_preset(name: str, **overrides: Any) -> dict[str, Any]:
 @dataclass
 class Context:
     """device: "cpu" | "cuda[:k]"; sizes: this section's size parameters; repeats, warmup: timed and
-    untimed warm calls; workdir: scratch space for runs the section starts."""
+    untimed warm calls; workdir: scratch space for runs the section starts; oracle_backend: the ground
+    truth's backend ("open3d", or "warp" where open3d is not installed)."""
 
     device: str
     sizes: dict[str, Any]
@@ -37,6 +38,7 @@ class Context:
     warmup: int
     workdir: str
     threads: int
+    oracle_backend: str = "open3d"
     _shapes: dict[str, Shape] = field(default_factory=dict)
     _oracles: dict[tuple[str, str], Oracle] = field(default_factory=dict)
 
@@ -45,7 +47,9 @@ class Context:
             self._shapes[name] = load_shape({"name": name})
         return self._shapes[name]
 
-    def oracle(self, name: str, backend: str = "open3d") -> Oracle:
+    def oracle(self, name: str, backend: str | None = None) -> Oracle:
+        """The shape's oracle with `backend` (default: oracle_backend), built once."""
+        backend = backend or self.oracle_backend
         if (name, backend) not in self._oracles:
             self._oracles[(name, backend)] = Oracle(self.shape(name).mesh, backend=backend)
         return self._oracles[(name, backend)]

@@ -16,19 +16,12 @@ import importlib.util
 import numpy as np
 import open3d as o3d
 
-from ddfbench.bench.context import DOMAIN, Context
+from ddfbench.bench.context import Context
 from ddfbench.bench.results import SectionResult, compare
 from ddfbench.bench.timing import measure_side_by_side
-from ddfbench.bench.views import view_rays
+from ddfbench.bench.views import incoherent_rays, view_rays
 
 BACKENDS = ("open3d", "embree") + (("warp",) if importlib.util.find_spec("warp") else ())
-
-
-def incoherent_rays(n: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
-    """n rays (n, 3), (n, 3): origins uniform in the field box, unit directions uniform on the sphere."""
-    rng = np.random.default_rng(seed)
-    d = rng.standard_normal((n, 3)).astype(np.float32)
-    return rng.uniform(-DOMAIN, DOMAIN, (n, 3)).astype(np.float32), d / np.linalg.norm(d, axis=1, keepdims=True)
 
 
 def bare_scene(mesh) -> o3d.t.geometry.RaycastingScene:

@@ -1,9 +1,11 @@
-"""The one view the ray benchmarks render: a pinhole camera looking at the origin (render.camera.Camera)."""
+"""The rays the benchmarks cast: the one view they render (a pinhole camera looking at the origin,
+render.camera.Camera) and incoherent rays through the field box."""
 
 from __future__ import annotations
 
 import numpy as np
 
+from ddfbench.geometry import BOX_HALF
 from ddfbench.render.camera import Camera
 
 EYE = (0.9, 0.5, 1.2)  # camera position in the normalized frame: the shape fills most of a 40 degree view
@@ -12,3 +14,10 @@ EYE = (0.9, 0.5, 1.2)  # camera position in the normalized frame: the shape fill
 def view_rays(size: int, eye=EYE, fov_deg: float = 40.0) -> tuple[np.ndarray, np.ndarray]:
     """size^2 pixel rays of a camera at `eye` looking at the origin (y up): origins, unit directions (size^2, 3) float32."""
     return Camera(np.asarray(eye, float), np.zeros(3), fov_deg, int(size), int(size)).rays()
+
+
+def incoherent_rays(n: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """n rays (n, 3), (n, 3) float32: origins uniform in the field box, unit directions uniform on the sphere."""
+    rng = np.random.default_rng(seed)
+    d = rng.standard_normal((n, 3)).astype(np.float32)
+    return rng.uniform(-BOX_HALF, BOX_HALF, (n, 3)).astype(np.float32), d / np.linalg.norm(d, axis=1, keepdims=True)

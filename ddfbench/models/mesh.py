@@ -10,7 +10,6 @@ import time
 from typing import Any, Mapping
 
 import numpy as np
-import pymeshlab
 import trimesh
 
 from ddfbench.geometry import BOX_HALF
@@ -22,6 +21,8 @@ def decimate(mesh: trimesh.Trimesh, faces: int) -> trimesh.Trimesh:
     """Quadric edge-collapse decimation to about `faces` triangles (pymeshlab); the mesh itself if smaller."""
     if faces <= 0 or faces >= len(mesh.faces):
         return mesh
+    import pymeshlab  # only LODs need it (a GPU machine may lack it: the full mesh does not)
+
     ms = pymeshlab.MeshSet()
     ms.add_mesh(pymeshlab.Mesh(np.asarray(mesh.vertices, np.float64), np.asarray(mesh.faces, np.int32)))
     ms.meshing_decimation_quadric_edge_collapse(
