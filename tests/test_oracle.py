@@ -151,3 +151,19 @@ def test_warp_oracle_needs_no_open3d(tmp_path):
     assert out.returncode == 0, out.stderr[-2000:]
     lines = out.stdout.strip().splitlines()
     assert lines[-2:] == ["[-0.5, 0.4] [0.5, inf] [2, 1] [True, False]", "open3d blocked"]
+
+
+def test_embree_pool_equals_the_embree_oracle(bunny, rng):
+    """embreex in worker processes (Embree on every core without open3d) gives the single-process answers, the
+    empty call included."""
+    from ddfbench.embree_pool import EmbreePool
+
+    o, d = random_rays(rng, 20001)
+    pool = EmbreePool(bunny.mesh, workers=2)
+    try:
+        t = pool.hit_distance(o, d)
+        assert np.isfinite(t).mean() > 0.1
+        assert np.array_equal(t, Oracle(bunny.mesh, "embree").hit_distance(o, d))
+        assert pool.hit_distance(np.zeros((0, 3)), np.zeros((0, 3))).shape == (0,)
+    finally:
+        pool.close()

@@ -7,9 +7,9 @@ Contestants, all answering first-hit depth (no normals) for the same rays:
   bf16 autocast and bf16 compiled (torch.compile; only with `compile: true`); beside it the bare
   network forward on the same box-entry points (what answering has to cost at least);
 - Warp BVH (ddfbench.warp_cast) on the same device, rays already there;
-- Embree on every CPU core (open3d RaycastingScene through the oracle, numpy rays on the host; only with
-  the open3d oracle: with `--oracle-backend warp`, for a machine without open3d, the row is left out and
-  the JSON says so);
+- Embree on every CPU core, numpy rays on the host: open3d's RaycastingScene through the oracle, or with
+  `--oracle-backend warp` (a machine without open3d) embreex in one process per core
+  (ddfbench.embree_pool); the JSON's details say which;
 - sphere tracing the neural SDF (conf/model/neural_sdf_tuned.yaml, trained `fit_seconds`) and a level-set grid SDF (`grid_resolution`),
   through their intersect (numpy in and out: host transfers included).
 Ray sets: "primary" (one pinhole camera, `px`^2 rays) and "incoherent" (origins uniform in the field
@@ -27,6 +27,7 @@ compile (bool), capacities (bool), model / neural (overrides of the main DDF / n
 
 from __future__ import annotations
 
+import importlib.util
 import os
 from typing import Callable
 
@@ -40,6 +41,7 @@ from ddfbench.bench.timing import Timing, measure_side_by_side
 from ddfbench.bench.views import incoherent_rays, view_rays
 from ddfbench.bench.tracing import grid_sdf, neural_sdf
 from ddfbench.ddf_infer import DDFDepth, box_entry_torch
+from ddfbench.embree_pool import EmbreePool
 from ddfbench.models.ddf import DDF
 from ddfbench.representation import Budget, FitData
 from ddfbench.sampling import surface
@@ -127,13 +129,24 @@ def run(ctx: Context) -> SectionResult:
     nsdf, result.details["neural_sdf"] = neural_sdf(ctx, SDF_PRESET)
     gsdf, result.details["grid_sdf"] = grid_sdf(ctx)
     warp = WarpCaster(shape.mesh.vertices, shape.mesh.faces, ctx.device)
-    chunk = int(s["chunk"])
 
+    embree, pool = embree_all_cores(ctx, oracle, shape.mesh, result)
+    try:
+        _race_all(ctx, result, samples, ddf, nsdf, gsdf, warp, oracle, embree)
+    finally:
+        if pool is not None:
+            pool.close()
+    return result
+
+
+def _race_all(ctx: Context, result: SectionResult, samples, ddf, nsdf, gsdf, warp, oracle, embree: dict) -> None:
+    """The two ray sets, the sweep and the capacities (run's body, once every contestant is built)."""
+    s, chunk = ctx.sizes, int(ctx.sizes["chunk"])
     variants = ddf_variants(ctx, ddf, compile_too=True)
     contestants: dict[str, Callable] = {name: (lambda o, d, on, dn, f=f: f(o, d)) for name, f in variants.items()}
     contestants.update({
         "warp_bvh": lambda o, d, on, dn: warp.cast_torch(o, d)[0],
-        **embree_all_cores(ctx, oracle, result),
+        **embree,
         "neural_sdf_trace": lambda o, d, on, dn: _sdf_t(nsdf, on, dn),
         "grid_sdf_trace": lambda o, d, on, dn: _sdf_t(gsdf, on, dn),
     })
@@ -165,20 +178,24 @@ def run(ctx: Context) -> SectionResult:
             result.rows.append(compare("race", f"{set_name}: DDF ({best}) rays/s", timed[best][1].rate(n), "rays/s",
                                        "goal 1e9 rays/s (H100/H200, 1M+ rays)", 1e9, device=ctx.device,
                                        threads=ctx.threads, target=SPEED_GOAL))
-    result.details["sweep"] = sweep(ctx, variants, warp, oracle, result)
+    result.details["sweep"] = sweep(ctx, variants, warp, embree, result)
     if s.get("capacities", True):
         result.details["capacities"] = capacities(ctx, samples, ray_sets["primary"], oracle, result)
-    return result
 
 
-def embree_all_cores(ctx: Context, oracle, result: SectionResult) -> dict[str, Callable]:
-    """{"embree_all_cores": contestant} through the open3d oracle (Embree on every core), or {} with the
-    reason in result.details where the oracle is Warp's (a machine without open3d)."""
+def embree_all_cores(ctx: Context, oracle, mesh, result: SectionResult) -> tuple[dict[str, Callable], EmbreePool | None]:
+    """({"embree_all_cores": contestant}, the pool to close or None): open3d's Embree through the oracle, or
+    where the oracle is Warp's (a machine without open3d) embreex in one process per core; ({}, None) with
+    the reason in result.details where neither is installed."""
     if ctx.oracle_backend == "open3d":
-        return {"embree_all_cores": lambda o, d, on, dn: oracle.hit_distance(on, dn)}
-    result.details["embree_all_cores"] = (f"not run: the oracle backend is {ctx.oracle_backend} (open3d, whose "
-                                          "RaycastingScene runs Embree on every core, is not in use)")
-    return {}
+        result.details["embree_all_cores"] = "open3d RaycastingScene (Embree on every core)"
+        return {"embree_all_cores": lambda o, d, on, dn: oracle.hit_distance(on, dn)}, None
+    if importlib.util.find_spec("embreex") is None:
+        result.details["embree_all_cores"] = "not run: neither open3d (the oracle is Warp's) nor embreex is installed"
+        return {}, None
+    pool = EmbreePool(mesh)
+    result.details["embree_all_cores"] = f"embreex in {pool.workers} processes (ddfbench.embree_pool; no open3d)"
+    return {"embree_all_cores": lambda o, d, on, dn: pool.hit_distance(on, dn)}, pool
 
 
 def _sdf_t(rep, o: np.ndarray, d: np.ndarray) -> np.ndarray:
@@ -193,7 +210,7 @@ def _diff(t: np.ndarray, t_fp32: np.ndarray) -> dict[str, float]:
             "mask_disagreement": float((a != b).mean())}
 
 
-def sweep(ctx: Context, variants: dict[str, DDFDepth], warp, oracle, result: SectionResult) -> list[dict]:
+def sweep(ctx: Context, variants: dict[str, DDFDepth], warp, embree: dict, result: SectionResult) -> list[dict]:
     """Incoherent ray counts `sweep`: median latency and rays/s of the DDF's fastest variant, Warp and
     Embree (up to embree_max rays)."""
     s, rows = ctx.sizes, []
@@ -203,7 +220,7 @@ def sweep(ctx: Context, variants: dict[str, DDFDepth], warp, oracle, result: Sec
         o_np, d_np = incoherent_rays(n, seed=2)
         contestants = {best_name: lambda o, d, on, dn: best(o, d), "warp_bvh": lambda o, d, on, dn: warp.cast_torch(o, d)[0]}
         if n <= int(s["embree_max"]):
-            contestants.update(embree_all_cores(ctx, oracle, result))
+            contestants.update(embree)
         timed = race(ctx, o_np, d_np, contestants)
         row = {"rays": n}
         for name, (_, timing) in timed.items():
