@@ -12,23 +12,20 @@ import time
 import numpy as np
 import open3d as o3d
 
-from ddfbench.bench.context import DOMAIN, Context, preset
+from ddfbench.bench.context import Context, preset
+from ddfbench.bench.oracle import bare_scene
 from ddfbench.bench.results import SectionResult, Target, compare
 from ddfbench.bench.timing import measure
+from ddfbench.bench.views import incoherent_rays
 from ddfbench.sampling import surface
 
 TARGET = Target(">=", 0.3)
 
 
-def bare_cast_rate(mesh, n: int, half: float, seed: int = 0) -> float:
-    """Median rays/s of open3d cast_rays over 3 calls of n random rays (origins in the box, uniform directions)."""
-    scene = o3d.t.geometry.RaycastingScene()
-    scene.add_triangles(o3d.core.Tensor(np.asarray(mesh.vertices, np.float32)),
-                        o3d.core.Tensor(np.asarray(mesh.faces, np.uint32)))
-    rng = np.random.default_rng(seed)
-    d = rng.standard_normal((n, 3)).astype(np.float32)
-    d /= np.linalg.norm(d, axis=1, keepdims=True)
-    rays = o3d.core.Tensor(np.hstack([rng.uniform(-half, half, (n, 3)).astype(np.float32), d]))
+def bare_cast_rate(mesh, n: int, seed: int = 0) -> float:
+    """Median rays/s of open3d cast_rays over 3 calls of n incoherent rays (origins in the box, uniform directions)."""
+    scene = bare_scene(mesh)
+    rays = o3d.core.Tensor(np.hstack(incoherent_rays(n, seed)))
     scene.cast_rays(rays[:1000])  # builds the BVH
     times = []
     for _ in range(3):
@@ -42,10 +39,10 @@ def run(ctx: Context) -> SectionResult:
     s = ctx.sizes
     shape, oracle = ctx.shape(s["shape"]), ctx.oracle(s["shape"])
     cfg = preset("sampling", "surface", face_mode=s["face_mode"], s_fc=s["s_fc"], s_dr=s["s_dr"], s_p=s["s_p"])
-    before = bare_cast_rate(shape.mesh, int(s["bare_rays"]), DOMAIN)
+    before = bare_cast_rate(shape.mesh, int(s["bare_rays"]))
     (samples, _, rejected), timing = measure(
         lambda: surface.sample(shape, oracle, cfg, "rays", np.random.default_rng(0)), ctx.repeats, warmup=0)
-    after = bare_cast_rate(shape.mesh, int(s["bare_rays"]), DOMAIN)
+    after = bare_cast_rate(shape.mesh, int(s["bare_rays"]))
     bare = 0.5 * (before + after)
     labels = len(samples)
     rate = timing.rate(labels)
