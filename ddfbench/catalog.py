@@ -48,7 +48,11 @@ def pymeshlab_samples_dir() -> str:
     $DDFBENCH_SAMPLE_MESHES names (a copy of it, for a machine without pymeshlab)."""
     if os.environ.get(SAMPLES_ENV):
         return os.environ[SAMPLES_ENV]
-    import pymeshlab
+    try:
+        import pymeshlab
+    except ImportError as exc:
+        raise InputError(f"the sample meshes come with pymeshlab, which is not installed ({exc}); set "
+                         f"{SAMPLES_ENV} to a folder holding them (bunny.obj, cow.obj, ...)") from None
 
     return os.path.join(os.path.dirname(pymeshlab.__file__), "tests", "sample_meshes")
 

@@ -3,18 +3,21 @@
 open3d's RaycastingScene runs Embree on every core itself. A machine without open3d (a GPU machine that
 gets only small wheels) still has embreex, which casts on one thread and holds the GIL, so the cores are
 used by processes: each builds its own scene once, and every call hands each worker a contiguous slice
-of the rays through one shared-memory block (N, 7) float32 [origin, direction, t].
+of the rays through one shared-memory block of BLOCK rows (BLOCK, 7) float32 [origin, direction, t],
+reused call after call (a larger call goes through it block by block, so /dev/shm needs only ~29 MB).
 """
 
 from __future__ import annotations
 
 import multiprocessing as mp
 import os
+from concurrent.futures import ProcessPoolExecutor
 from multiprocessing import shared_memory
 
 import numpy as np
 import trimesh
 
+BLOCK = 1 << 20  # rays per pass through the shared block
 _WORKER: dict = {}  # the worker process's oracle
 
 
@@ -24,12 +27,12 @@ def _init(vertices: np.ndarray, faces: np.ndarray) -> None:
     _WORKER["oracle"] = Oracle(trimesh.Trimesh(vertices, faces, process=False), "embree")
 
 
-def _cast(job: tuple[str, int, int, int]) -> None:
-    """First-hit t of rows start:stop of the shared block `name` of n rays, written into its column 6."""
-    name, n, start, stop = job
+def _cast(job: tuple[str, int, int]) -> None:
+    """First-hit t of rows start:stop of the shared block `name`, written into its column 6."""
+    name, start, stop = job
     shm = shared_memory.SharedMemory(name=name)
     try:
-        rays = np.ndarray((n, 7), np.float32, buffer=shm.buf)
+        rays = np.ndarray((BLOCK, 7), np.float32, buffer=shm.buf)
         rays[start:stop, 6] = _WORKER["oracle"].hit_distance(rays[start:stop, :3], rays[start:stop, 3:6])
         del rays
     finally:
@@ -37,35 +40,36 @@ def _cast(job: tuple[str, int, int, int]) -> None:
 
 
 class EmbreePool:
-    """hit_distance like Oracle's (embree backend), cast by `workers` processes (default: every core).
+    """hit_distance like Oracle's (embree backend), cast by `workers` processes (default: the cores this process
+    may run on). A worker that fails to start or dies ends the call with BrokenProcessPool, never a hang.
 
     The workers build their scenes as the pool starts, so a first call may wait for them (the bench's untimed
-    cold call); close() ends the workers."""
+    cold call); close() ends the workers and frees the block."""
 
     def __init__(self, mesh: trimesh.Trimesh, workers: int | None = None):
-        self.workers = int(workers or os.cpu_count() or 1)
-        self._pool = mp.get_context("spawn").Pool(
-            self.workers, _init, (np.asarray(mesh.vertices, np.float64), np.asarray(mesh.faces, np.int64)))
+        from ddfbench.oracle import Oracle
+
+        Oracle(mesh, "embree")  # a broken embreex fails here, in this process, with its own message
+        self.workers = int(workers or (len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()))
+        self._pool = ProcessPoolExecutor(self.workers, mp.get_context("spawn"), _init,
+                                         (np.asarray(mesh.vertices, np.float64), np.asarray(mesh.faces, np.int64)))
+        self._shm = shared_memory.SharedMemory(create=True, size=BLOCK * 7 * 4)
+        self._rays = np.ndarray((BLOCK, 7), np.float32, buffer=self._shm.buf)
 
     def hit_distance(self, origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
         """t (N,) float32 of the first hit of rays (N,3),(N,3) with unit directions (inf on a miss)."""
         origins, directions = np.reshape(origins, (-1, 3)), np.reshape(directions, (-1, 3))
-        n = len(origins)
-        if n == 0:
-            return np.zeros(0, np.float32)
-        shm = shared_memory.SharedMemory(create=True, size=n * 7 * 4)
-        try:
-            rays = np.ndarray((n, 7), np.float32, buffer=shm.buf)
-            rays[:, :3], rays[:, 3:6] = origins, directions
-            bounds = np.linspace(0, n, min(self.workers, n) + 1).astype(int)
-            self._pool.map(_cast, [(shm.name, n, a, b) for a, b in zip(bounds[:-1], bounds[1:])])
-            t = rays[:, 6].copy()
-            del rays
-            return t
-        finally:
-            shm.close()
-            shm.unlink()
+        t = np.empty(len(origins), np.float32)
+        for s in range(0, len(origins), BLOCK):
+            m = min(BLOCK, len(origins) - s)
+            self._rays[:m, :3], self._rays[:m, 3:6] = origins[s : s + m], directions[s : s + m]
+            bounds = np.linspace(0, m, min(self.workers, m) + 1).astype(int)
+            list(self._pool.map(_cast, [(self._shm.name, a, b) for a, b in zip(bounds[:-1], bounds[1:])]))
+            t[s : s + m] = self._rays[:m, 6]
+        return t
 
     def close(self) -> None:
-        self._pool.terminate()
-        self._pool.join()
+        self._pool.shutdown(cancel_futures=True)
+        del self._rays
+        self._shm.close()
+        self._shm.unlink()

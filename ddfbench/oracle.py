@@ -18,6 +18,8 @@ from typing import TYPE_CHECKING, Iterator
 import numpy as np
 import trimesh
 
+from ddfbench.errors import InputError
+
 if TYPE_CHECKING:
     import open3d as o3d
 
@@ -40,7 +42,11 @@ def _ray_chunks(origins: np.ndarray, directions: np.ndarray) -> Iterator[tuple[s
 
 def _tensor(a: np.ndarray) -> o3d.core.Tensor:
     """A zero-copy open3d view of a C-contiguous array (the tensor holds a reference to it)."""
-    import open3d as o3d
+    try:
+        import open3d as o3d
+    except ImportError as exc:
+        raise InputError(f"this oracle query needs open3d, which is not installed ({exc}); "
+                         "oracle.backend=warp answers every query without it") from None
 
     return o3d.core.Tensor.from_numpy(np.ascontiguousarray(a))
 
@@ -68,17 +74,27 @@ class Oracle:
             from trimesh.ray.ray_pyembree import RayMeshIntersector
 
             self._embree = RayMeshIntersector(mesh)
+        if backend == "open3d":  # every query needs the scene: a missing open3d is one line here, not mid-sampling
+            self._o3d_scene = self._build_scene()
 
     @property
     def _scene(self):
-        """open3d's RaycastingScene of the mesh, built on first use (never with the warp backend)."""
+        """open3d's RaycastingScene of the mesh (open3d backend: built in __init__; embree: on first use of a
+        query other than first hits; warp: never)."""
         if self._o3d_scene is None:
-            import open3d as o3d
-
-            self._o3d_scene = o3d.t.geometry.RaycastingScene()
-            self._o3d_scene.add_triangles(o3d.core.Tensor(_f32(self.mesh.vertices)),
-                                          o3d.core.Tensor(np.ascontiguousarray(self.mesh.faces, dtype=np.uint32)))
+            self._o3d_scene = self._build_scene()
         return self._o3d_scene
+
+    def _build_scene(self):
+        try:
+            import open3d as o3d
+        except ImportError as exc:
+            raise InputError(f"oracle backend '{self.backend}': open3d is not installed ({exc}); "
+                             "oracle.backend=warp answers every query without it") from None
+        scene = o3d.t.geometry.RaycastingScene()
+        scene.add_triangles(o3d.core.Tensor(_f32(self.mesh.vertices)),
+                            o3d.core.Tensor(np.ascontiguousarray(self.mesh.faces, dtype=np.uint32)))
+        return scene
 
     # ---- rays -------------------------------------------------------------------------------
     def first_hit(self, origins: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -62,7 +62,8 @@ def _image_metrics(rec: dict[str, Any], gt: trimesh.Trimesh, scene: dict[str, An
     once = {**scene, "timing": {**(scene.get("timing") or {}), "repeats": 1, "warmup": 0}}
     with tempfile.TemporaryDirectory(prefix="ddfbench-reeval-") as tmp:
         seed = int(rec["config"].get("seed", 0))
-        return render_scene(rep, mesh_reference(gt, domain), once, tmp, seed).get("metrics", {})
+        backend = str((rec["config"].get("oracle") or {}).get("backend", "open3d"))
+        return render_scene(rep, mesh_reference(gt, domain, backend=backend), once, tmp, seed).get("metrics", {})
 
 
 def reevaluated(rec: dict[str, Any], n_points: int, scene: dict[str, Any] | str | None) -> dict[str, Any]:

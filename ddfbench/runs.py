@@ -128,10 +128,10 @@ OPTIONAL = ("open3d", "warp", "pymeshlab", "embreex")  # modules whose versions 
 
 
 def _installed(module: str) -> str | None:
-    """The version of `module` if it is imported, else of the installed distribution that provides it (e.g.
-    open3d-cpu for open3d); None where none does (or an import of it was blocked)."""
-    if module in sys.modules:
-        return getattr(sys.modules[module], "__version__", None)
+    """The version of the installed distribution that provides `module` (e.g. open3d-cpu for open3d); None where
+    none does or where its import is blocked (sys.modules[module] is None)."""
+    if module in sys.modules and sys.modules[module] is None:  # an import blocked on purpose
+        return None
     from importlib import metadata
 
     for dist in _providers().get(module, []):

@@ -44,7 +44,7 @@ wp = _warp()
 @wp.func
 def _woop_t(o: wp.vec3, kx: int, ky: int, kz: int, shear: wp.vec3, a: wp.vec3, b: wp.vec3, c: wp.vec3) -> float:
     """Distance along the ray to triangle abc by the watertight test of Woop, Benthin and Wald (JCGT 2013),
-    -1 on a miss. (kx, ky, kz) and shear come from the ray direction (see _first_hit_kernel)."""
+    -1 on a miss. (kx, ky, kz) and shear come from the ray direction (see _nearest_from)."""
     pa = a - o
     pb = b - o
     pc = c - o
@@ -166,6 +166,7 @@ class WarpCaster:
         self._lowers = wp.array(corners.min(axis=1) - pad, dtype=wp.vec3, device=wdev)
         self._uppers = wp.array(corners.max(axis=1) + pad, dtype=wp.vec3, device=wdev)
         self._bvh = wp.Bvh(self._lowers, self._uppers)
+        wp.synchronize_device(wdev)  # built on Warp's stream; the queries launch on torch's
         self._mesh = None  # wp.Mesh for closest-point queries, built on first use
 
     def cast_torch(self, origins: torch.Tensor, directions: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
@@ -211,6 +212,7 @@ class WarpCaster:
         mesh_query_point_no_sign, over a wp.Mesh built on first use)."""
         if self._mesh is None:
             self._mesh = wp.Mesh(points=self._points, indices=self._indices)
+            wp.synchronize_device(self._points.device)
         n = len(np.reshape(points, (-1, 3)))
         closest, face = np.empty((n, 3), np.float32), np.empty(n, np.int64)
         for sl, p in self._chunks(points):

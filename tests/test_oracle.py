@@ -142,15 +142,18 @@ def test_warp_oracle_needs_no_open3d(tmp_path):
         "p = np.array([[0.0, 0.0, 0.0], [0.9, 0.0, 0.0]]); d = np.array([[1.0, 0.0, 0.0]] * 2)\n"
         "print(orc.signed_distance(p).astype(float).round(2).tolist(), orc.hit_distance(p, d).astype(float).round(2).tolist(),\n"
         "      orc.count_crossings(p - [[1.0, 0, 0]], d).tolist(), orc.any_hit(p, d).tolist())\n"
-        "try:\n"
-        "    Oracle(orc.mesh, 'open3d').unsigned_distance(p)\n"
-        "except ImportError:\n"
-        "    print('open3d blocked')\n"
+        "from ddfbench.errors import InputError\n"
+        "for backend, query in (('open3d', 'hit_distance'), ('embree', 'count_crossings')):\n"
+        "    try:\n"
+        "        getattr(Oracle(orc.mesh, backend), query)(p, d)\n"
+        "    except InputError as err:\n"
+        "        assert '\\n' not in str(err) and 'oracle.backend=warp' in str(err), err\n"
+        "        print('open3d blocked')\n"
     )
     out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, cwd=tmp_path, timeout=300)
     assert out.returncode == 0, out.stderr[-2000:]
     lines = out.stdout.strip().splitlines()
-    assert lines[-2:] == ["[-0.5, 0.4] [0.5, inf] [2, 1] [True, False]", "open3d blocked"]
+    assert lines[-3:] == ["[-0.5, 0.4] [0.5, inf] [2, 1] [True, False]", "open3d blocked", "open3d blocked"]
 
 
 def test_embree_pool_equals_the_embree_oracle(bunny, rng):

@@ -64,3 +64,18 @@ def test_is_done_only_for_ok_records_of_this_schema(tmp_path):
     with open(path, "w") as fh:
         fh.write("{ not json")
     assert not runs.is_done(path)
+
+
+def test_environment_records_optional_package_versions_whatever_was_imported(monkeypatch):
+    """open3d, warp, pymeshlab and embreex versions come from the installed distributions (pymeshlab has no
+    __version__, open3d installs as open3d-cpu); a blocked import (a machine without it) records None."""
+    import sys
+
+    from ddfbench.runs import OPTIONAL, environment
+    from ddfbench.shapes import load_shape
+
+    load_shape({"name": "bone"})  # imports pymeshlab, whose module has no __version__
+    versions = environment("cpu", 1)["versions"]
+    assert set(OPTIONAL) <= set(versions) and versions["pymeshlab"] and versions["open3d"]
+    monkeypatch.setitem(sys.modules, "open3d", None)
+    assert environment("cpu", 1)["versions"]["open3d"] is None

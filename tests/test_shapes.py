@@ -123,7 +123,11 @@ def test_sample_meshes_from_a_copy_without_pymeshlab(tmp_path, monkeypatch):
     bone = load_shape({"name": "bone"})
     assert bone.source == str(tmp_path / "bone.ply") and len(bone.mesh.faces) > 1000
     assert decimate(bone.mesh, 0) is bone.mesh
-    with pytest.raises(ImportError):
+    with pytest.raises(InputError, match=r"model.faces=500: mesh LODs need pymeshlab"):
         decimate(bone.mesh, 500)
     with pytest.raises(InputError, match="cow"):  # not in the copy: the usual one-line error naming the file
         load_shape({"name": "cow"})
+    monkeypatch.delenv(SAMPLES_ENV)
+    with pytest.raises(InputError, match=SAMPLES_ENV) as err:  # neither pymeshlab nor a copy: say what to set
+        load_shape({"name": "bone"})
+    assert "\n" not in str(err.value)

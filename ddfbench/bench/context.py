@@ -51,5 +51,6 @@ class Context:
         """The shape's oracle with `backend` (default: oracle_backend), built once."""
         backend = backend or self.oracle_backend
         if (name, backend) not in self._oracles:
-            self._oracles[(name, backend)] = Oracle(self.shape(name).mesh, backend=backend)
+            device = self.device if backend == "warp" else "cpu"  # Warp's CPU kernels run on one core
+            self._oracles[(name, backend)] = Oracle(self.shape(name).mesh, backend=backend, device=device)
         return self._oracles[(name, backend)]

@@ -16,9 +16,9 @@ Ray sets: "primary" (one pinhole camera, `px`^2 rays) and "incoherent" (origins 
 box, uniform directions). Then a sweep of incoherent ray counts (`sweep`: latency and throughput of the
 DDF's fastest variant, Warp and Embree) and the four DDF capacities of the Pareto sweep
 (conf/experiment/pareto.yaml, each trained `fit_seconds`) on the primary rays.
-Accuracy: depth MAE on rays both the contestant and the oracle hit, and mask IoU, against the oracle
-(open3d, or Warp on the CPU with `--oracle-backend warp`: then warp_bvh is measured against its own
-algorithm, whose agreement with Embree the hard-case suite checks) on the same rays. Every timed call is synchronized (ddfbench.render.timing.clock), warm-up
+Accuracy: depth MAE on rays both the contestant and the reference hit, and mask IoU, against Embree on
+the same rays (the open3d oracle, or with `--oracle-backend warp` the embreex pool, so that warp_bvh is
+never scored against itself; Warp's own answers only where embreex is missing too, as details say). Every timed call is synchronized (ddfbench.render.timing.clock), warm-up
 excluded (ddfbench.bench.timing). Absolute figures hold for the device named in the JSON's env.
 Sizes: shape, px, incoherent_rays, sweep (ray counts), embree_max (largest sweep count Embree runs),
 fit_seconds, grid_resolution, n_samples (neural SDF samples), chunk (DDF rays per network call),
@@ -131,16 +131,20 @@ def run(ctx: Context) -> SectionResult:
     warp = WarpCaster(shape.mesh.vertices, shape.mesh.faces, ctx.device)
 
     embree, pool = embree_all_cores(ctx, oracle, shape.mesh, result)
+    reference = pool.hit_distance if pool is not None else oracle.hit_distance
+    result.details["reference"] = "embreex pool" if pool is not None else f"{ctx.oracle_backend} oracle"
     try:
-        _race_all(ctx, result, samples, ddf, nsdf, gsdf, warp, oracle, embree)
+        _race_all(ctx, result, samples, ddf, nsdf, gsdf, warp, reference, embree)
     finally:
         if pool is not None:
             pool.close()
     return result
 
 
-def _race_all(ctx: Context, result: SectionResult, samples, ddf, nsdf, gsdf, warp, oracle, embree: dict) -> None:
-    """The two ray sets, the sweep and the capacities (run's body, once every contestant is built)."""
+def _race_all(ctx: Context, result: SectionResult, samples, ddf, nsdf, gsdf, warp, reference: Callable,
+              embree: dict) -> None:
+    """The two ray sets, the sweep and the capacities (run's body, once every contestant is built);
+    reference(o, d) -> t (N,): the depth every contestant is scored against."""
     s, chunk = ctx.sizes, int(ctx.sizes["chunk"])
     variants = ddf_variants(ctx, ddf, compile_too=True)
     contestants: dict[str, Callable] = {name: (lambda o, d, on, dn, f=f: f(o, d)) for name, f in variants.items()}
@@ -157,7 +161,7 @@ def _race_all(ctx: Context, result: SectionResult, samples, ddf, nsdf, gsdf, war
         bare = {f"ddf_bare_{p}": (lambda o, d, on, dn, f=bare_forward(ddf, o_dev, d_dev, chunk, p): f())
                 for p in ("fp32", "bf16")}  # on the set's own entry points
         timed = race(ctx, o_np, d_np, {**contestants, **bare})
-        t_ref = oracle.hit_distance(o_np, d_np)
+        t_ref = reference(o_np, d_np)
         details = result.details.setdefault(set_name, {"rays": n})
         for name, (t, timing) in timed.items():
             details[name] = {**timing.as_dict(), "rays_per_s": timing.rate(n)}
@@ -180,7 +184,7 @@ def _race_all(ctx: Context, result: SectionResult, samples, ddf, nsdf, gsdf, war
                                        threads=ctx.threads, target=SPEED_GOAL))
     result.details["sweep"] = sweep(ctx, variants, warp, embree, result)
     if s.get("capacities", True):
-        result.details["capacities"] = capacities(ctx, samples, ray_sets["primary"], oracle, result)
+        result.details["capacities"] = capacities(ctx, samples, ray_sets["primary"], reference, result)
 
 
 def embree_all_cores(ctx: Context, oracle, mesh, result: SectionResult) -> tuple[dict[str, Callable], EmbreePool | None]:
@@ -233,11 +237,11 @@ def sweep(ctx: Context, variants: dict[str, DDFDepth], warp, embree: dict, resul
     return rows
 
 
-def capacities(ctx: Context, samples, primary, oracle, result: SectionResult) -> dict[str, dict]:
+def capacities(ctx: Context, samples, primary, reference: Callable, result: SectionResult) -> dict[str, dict]:
     """The Pareto sweep's four DDF capacities, each trained fit_seconds: rays/s (fp32, bf16; not compiled:
     a compile per network costs more device time than it tells) and accuracy."""
     o_np, d_np = primary
-    t_ref, out = oracle.hit_distance(o_np, d_np), {}
+    t_ref, out = reference(o_np, d_np), {}
     for level, overrides in pareto_ddf_capacities().items():
         rep, info = train_ddf(ctx, samples, overrides)
         timed = race(ctx, o_np, d_np, {name: (lambda o, d, on, dn, f=f: f(o, d)) for name, f in ddf_variants(ctx, rep, False).items()})

@@ -12,6 +12,7 @@ from typing import Any, Mapping
 import numpy as np
 import trimesh
 
+from ddfbench.errors import InputError
 from ddfbench.geometry import BOX_HALF
 from ddfbench.oracle import Oracle
 from ddfbench.representation import Budget, FitData, FitStats, Hits, Probe, RayStatus, Representation
@@ -21,7 +22,11 @@ def decimate(mesh: trimesh.Trimesh, faces: int) -> trimesh.Trimesh:
     """Quadric edge-collapse decimation to about `faces` triangles (pymeshlab); the mesh itself if smaller."""
     if faces <= 0 or faces >= len(mesh.faces):
         return mesh
-    import pymeshlab  # only LODs need it (a GPU machine may lack it: the full mesh does not)
+    try:
+        import pymeshlab  # only LODs need it (a GPU machine may lack it: the full mesh does not)
+    except ImportError as exc:
+        raise InputError(f"model.faces={faces}: mesh LODs need pymeshlab, which is not installed ({exc}); "
+                         "model.faces=0 is the full mesh") from None
 
     ms = pymeshlab.MeshSet()
     ms.add_mesh(pymeshlab.Mesh(np.asarray(mesh.vertices, np.float64), np.asarray(mesh.faces, np.int32)))
