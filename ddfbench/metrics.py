@@ -120,21 +120,11 @@ def matched_normal_consistency(na: np.ndarray, nb: np.ndarray, a_to_b: np.ndarra
 
 
 def point_to_surface(points: np.ndarray, mesh: trimesh.Trimesh) -> np.ndarray:
-    """Exact unsigned distance (N,) from points (N,3) to the triangles of mesh: open3d's RaycastingScene, or
-    Warp's closest points on the CPU where open3d is not installed (the two agree within 1e-6,
-    tests/test_oracle.py)."""
-    try:
-        import open3d as o3d
-    except ImportError:
-        from ddfbench.warp_cast import WarpCaster
+    """Exact unsigned distance (N,) float64 from points (N,3) to the triangles of mesh: an oracle of the mesh with
+    the backend that answers every query here (open3d, or Warp where open3d is not installed)."""
+    from ddfbench.oracle import Oracle, full_backend
 
-        p = np.asarray(points, np.float32).reshape(-1, 3)
-        closest = WarpCaster(mesh.vertices, mesh.faces).closest_point(p)[0]
-        return np.linalg.norm(closest - p, axis=1).astype(np.float64)
-    scene = o3d.t.geometry.RaycastingScene()
-    scene.add_triangles(o3d.core.Tensor(np.asarray(mesh.vertices, np.float32)),
-                        o3d.core.Tensor(np.asarray(mesh.faces, np.uint32)))
-    return scene.compute_distance(o3d.core.Tensor(np.asarray(points, np.float32))).numpy().astype(np.float64)
+    return Oracle(mesh, full_backend()).unsigned_distance(points).astype(np.float64)
 
 
 def cloud_metrics(gt: np.ndarray, rec: np.ndarray, radii: Sequence[float]) -> dict[str, Any]:

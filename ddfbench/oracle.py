@@ -26,6 +26,23 @@ if TYPE_CHECKING:
 _CHUNK = 1 << 22  # rays or points per backend call, caps temporary memory (~200 MB)
 
 
+def full_backend() -> str:
+    """The backend that answers every query on this machine: "open3d" where it is installed, else "warp"."""
+    import importlib.util
+
+    return "open3d" if importlib.util.find_spec("open3d") else "warp"
+
+
+def _open3d(what: str):
+    """The open3d module; a one-line InputError naming `what` needs it where it is not installed."""
+    try:
+        import open3d
+    except ImportError as exc:
+        raise InputError(f"{what}: open3d is not installed ({exc}); oracle.backend=warp answers every query "
+                         "without it") from None
+    return open3d
+
+
 def _f32(a: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(a, dtype=np.float32)
 
@@ -42,11 +59,7 @@ def _ray_chunks(origins: np.ndarray, directions: np.ndarray) -> Iterator[tuple[s
 
 def _tensor(a: np.ndarray) -> o3d.core.Tensor:
     """A zero-copy open3d view of a C-contiguous array (the tensor holds a reference to it)."""
-    try:
-        import open3d as o3d
-    except ImportError as exc:
-        raise InputError(f"this oracle query needs open3d, which is not installed ({exc}); "
-                         "oracle.backend=warp answers every query without it") from None
+    o3d = _open3d("this oracle query")
 
     return o3d.core.Tensor.from_numpy(np.ascontiguousarray(a))
 
@@ -86,11 +99,7 @@ class Oracle:
         return self._o3d_scene
 
     def _build_scene(self):
-        try:
-            import open3d as o3d
-        except ImportError as exc:
-            raise InputError(f"oracle backend '{self.backend}': open3d is not installed ({exc}); "
-                             "oracle.backend=warp answers every query without it") from None
+        o3d = _open3d(f"oracle backend '{self.backend}'")
         scene = o3d.t.geometry.RaycastingScene()
         scene.add_triangles(o3d.core.Tensor(_f32(self.mesh.vertices)),
                             o3d.core.Tensor(np.ascontiguousarray(self.mesh.faces, dtype=np.uint32)))

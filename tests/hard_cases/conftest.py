@@ -8,6 +8,7 @@ import torch
 
 from ddfbench import plugins
 from ddfbench.models import available_families
+from ddfbench.oracle import full_backend
 from ddfbench.shapes import HARD_CASES, Shape, load_shape
 
 torch.set_num_threads(1)
@@ -35,7 +36,7 @@ def has_warp() -> bool:
 
 
 # the ground truth where open3d is missing (a GPU machine that gets only small wheels): Warp answers every query
-ORACLE_BACKEND = "open3d" if importlib.util.find_spec("open3d") else "warp"
+ORACLE_BACKEND = full_backend()
 
 
 def backend_params(*names: str) -> list:
