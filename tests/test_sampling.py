@@ -110,6 +110,23 @@ def test_sdf_labels_agree_with_trimesh(rng, tmp_path, strategy, overrides):
         assert np.median(np.abs(samples.sdf)) < 0.03
 
 
+def test_sdf_uniform_appends_box_points_to_the_same_narrow_band(rng, tmp_path):
+    bone = load_shape({"name": "bone"})
+    oracle = Oracle(bone.mesh)
+    band, _, _ = build(bone, oracle, config("surface"), "sdf", 0, str(tmp_path))
+    mixed, _, info = build(bone, oracle, config("surface", sdf_uniform=0.25), "sdf", 0, str(tmp_path))
+    n = len(band)
+    assert np.array_equal(mixed.x[:n], band.x) and np.array_equal(mixed.sdf[:n], band.sdf)
+    assert len(mixed) - n == info["uniform_labels"] == round(n / 3)  # a quarter of all labels
+    tail = mixed.x[n:]
+    assert np.all(np.abs(tail) <= 0.6) and np.all(tail.min(axis=0) < -0.55) and np.all(tail.max(axis=0) > 0.55)
+    # uniform in the box: the bone fills ~2 % of it, and most box points lie beyond the narrow band
+    assert (mixed.sdf[n:] < 0).mean() < 0.05 and np.median(np.abs(mixed.sdf[n:])) > 3 * 0.05
+    idx = rng.choice(len(tail), 300, replace=False)
+    ref = -trimesh.proximity.signed_distance(bone.mesh, tail[idx].astype(np.float64))
+    assert np.abs(mixed.sdf[n:][idx] - ref).max() < 1e-4
+
+
 def test_paper_eq9_leaves_the_triangle_default_does_not(rng):
     a, b = barycentric(rng, 200000, "paper_eq9")
     assert abs((a + b > 1).mean() - 0.5) < 0.01
@@ -186,7 +203,8 @@ def test_cache_reuses_the_dataset(sphere, tmp_path):
 
 
 @pytest.mark.parametrize("key,value", [("s_fc", 0), ("s_dr", 2.5), ("s_p", -1), ("s_fc", True), ("steps", "spiral"),
-                                       ("t_min", 0), ("face_mode", "some")])
+                                       ("t_min", 0), ("face_mode", "some"),
+                                       ("sdf_uniform", 1.0), ("sdf_uniform", -0.1), ("sdf_uniform", "half")])
 def test_bad_surface_values(sphere, tmp_path, key, value):
     with pytest.raises(InputError, match=f"sampling.{key}"):
         build(sphere, Oracle(sphere.mesh), config("surface", **{key: value}), "rays", 0, str(tmp_path))

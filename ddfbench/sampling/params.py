@@ -66,3 +66,11 @@ def flag(cfg: Mapping[str, Any], key: str) -> bool:
     if not isinstance(v, bool):
         raise InputError(f"sampling.{key}={v!r}: must be true or false")
     return v
+
+
+def share(cfg: Mapping[str, Any], key: str) -> float:
+    """A number in [0, 1)."""
+    v = cfg[key]
+    if not (isinstance(v, numbers.Real) and not isinstance(v, bool) and 0 <= float(v) < 1):
+        raise InputError(f"sampling.{key}={v!r}: must be a number in [0, 1)")
+    return float(v)

@@ -21,7 +21,10 @@ perpendicular to theta (the paper's theta +- pi/2). Marching distances lie in [t
 
 SDF: s_dr x s_p points per surface point, p + sigma N(0, I) with sigma cycling over sdf_sigmas
 (DeepSDF-style narrow band), labelled by the oracle's signed distance; points outside the box
-are rejected.
+are rejected. With sdf_uniform = f > 0, points uniform in the field box are appended after the
+near-surface ones, f of all SDF labels (the near-surface labels are those of f = 0, row for row):
+the narrow band alone leaves the box more than ~3 max(sdf_sigmas) from the surface unlabelled, where
+the ray labels reach to the box exit.
 
 Perpendicular rays that hit are dropped (counted as `perpendicular_hit`).
 
@@ -41,6 +44,7 @@ import numpy as np
 from ddfbench.geometry import ray_box
 from ddfbench.oracle import Oracle
 from ddfbench.sampling import params
+from ddfbench.sampling.box import uniform_in_box
 from ddfbench.sampling.collect import Collector, chunks
 from ddfbench.sampling.directions import DIRECTION_RULES, random_perpendicular
 from ddfbench.sampling.steps import STEP_RULES, marching_distances
@@ -49,7 +53,7 @@ from ddfbench.samples import Samples
 from ddfbench.shapes import Shape
 
 KEYS = ("face_mode", "s_fc", "s_dr", "s_p", "barycentric", "directions", "steps", "t_min",
-        "perpendicular", "sdf_sigmas", "box", "max_samples")
+        "perpendicular", "sdf_sigmas", "sdf_uniform", "box", "max_samples")
 OFFSET = 1e-5  # forward rays leave from p + OFFSET theta, off p's own face
 TOL = 1e-5  # occlusion margin, backward-check tolerance and least height above the face (unit-cube units)
 CHUNK_CANDIDATES = 1 << 21
@@ -70,6 +74,7 @@ def read_config(cfg: Mapping[str, Any]) -> dict[str, Any]:
         "t_min": params.positive(cfg, "t_min"),
         "perpendicular": params.flag(cfg, "perpendicular"),
         "sdf_sigmas": params.number_list(cfg, "sdf_sigmas"),
+        "sdf_uniform": params.share(cfg, "sdf_uniform"),
         "box": params.positive(cfg, "box"),
         "max_samples": params.count(cfg, "max_samples"),
     }
@@ -83,7 +88,8 @@ def sample(shape: Shape, oracle: Oracle, cfg: Mapping[str, Any], kind: str,
     per_point = p["s_dr"] * p["s_p"]
     n_cand = len(faces) * per_point
     out = Collector(p["max_samples"], f"surface sampling of {shape.name} ({n_cand} candidates)")
-    out.expect(n_cand, kind, most=n_cand * (1 if kind == "sdf" else LABELS_PER_CANDIDATE[p["perpendicular"]]))
+    n_labels = n_cand + _uniform_count(n_cand, p) if kind == "sdf" else n_cand
+    out.expect(n_labels, kind, most=n_labels if kind == "sdf" else n_cand * LABELS_PER_CANDIDATE[p["perpendicular"]])
     rejected: dict[str, int] = {}
     for sl in chunks(len(faces), max(1, CHUNK_CANDIDATES // per_point)):
         pts = points_on_faces(shape.mesh, faces[sl], rng, p["barycentric"])
@@ -92,7 +98,9 @@ def sample(shape: Shape, oracle: Oracle, cfg: Mapping[str, Any], kind: str,
         else:
             normals = np.asarray(shape.mesh.face_normals, np.float64)[faces[sl]]
             _marching_rays(pts, normals, p, oracle, rng, out, rejected, done=sl.stop / len(faces))
-    info = dict(p, n_points=int(len(faces)), candidates=int(n_cand))
+    n_uniform = _uniform_count(out.n, p) if kind == "sdf" else 0
+    _uniform_sdf(n_uniform, p, oracle, rng, out)
+    info = dict(p, n_points=int(len(faces)), candidates=int(n_cand), uniform_labels=n_uniform)
     return out.samples(), info, rejected
 
 
@@ -159,3 +167,16 @@ def _near_surface_sdf(pts, p, oracle, rng, out: Collector, rejected, done: float
     _count(rejected, "outside_box", (~inside_box).sum())
     x = x[inside_box].astype(np.float32)
     out.add(x, sdf=oracle.signed_distance(x), done=done)
+
+
+def _uniform_count(n_near: int, p) -> int:
+    """How many uniform box points make sdf_uniform of all SDF labels beside n_near near-surface ones."""
+    f = p["sdf_uniform"]
+    return int(round(n_near * f / (1.0 - f)))
+
+
+def _uniform_sdf(n: int, p, oracle, rng, out: Collector) -> None:
+    """n SDF labels at points uniform in the field box, in chunks (none drawn when n = 0)."""
+    for sl in chunks(n, CHUNK_CANDIDATES):
+        x = uniform_in_box(rng, sl.stop - sl.start, p["box"])
+        out.add(x, sdf=oracle.signed_distance(x))

@@ -40,7 +40,7 @@ QUICK = {
 }
 SURFACE_SAMPLING = {"strategy": "surface", "face_mode": "total", "s_fc": 40, "s_dr": 4, "s_p": 4,
                     "barycentric": "uniform", "directions": "uniform", "steps": "stratified", "t_min": 0.001,
-                    "perpendicular": True, "sdf_sigmas": [0.005, 0.05], "box": 0.6, "max_samples": 10**8}
+                    "perpendicular": True, "sdf_sigmas": [0.005, 0.05], "sdf_uniform": 0.0, "box": 0.6, "max_samples": 10**8}
 
 
 def quick_fit(family, shape, seconds=3.0, steps=400, seed=0, **cfg):
