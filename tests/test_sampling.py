@@ -113,7 +113,7 @@ def test_sdf_labels_agree_with_trimesh(rng, tmp_path, strategy, overrides):
 def test_sdf_uniform_appends_box_points_to_the_same_narrow_band(rng, tmp_path):
     bone = load_shape({"name": "bone"})
     oracle = Oracle(bone.mesh)
-    band, _, _ = build(bone, oracle, config("surface"), "sdf", 0, str(tmp_path))
+    band, _, _ = build(bone, oracle, config("surface", sdf_uniform=0.0), "sdf", 0, str(tmp_path))
     mixed, _, info = build(bone, oracle, config("surface", sdf_uniform=0.25), "sdf", 0, str(tmp_path))
     n = len(band)
     assert np.array_equal(mixed.x[:n], band.x) and np.array_equal(mixed.sdf[:n], band.sdf)
