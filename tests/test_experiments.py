@@ -80,8 +80,7 @@ def test_budget_overrides_and_seeds_change_the_grid(tmp_path):
 
 
 def test_the_built_in_plugins_join_the_documented_experiments():
-    """The documented membership: these lists change only when a YAML joins or leaves (reports/storage
-    predates the move of the capacity sweeps to the tuned presets: reports/README.md says so)."""
+    """The documented membership: these lists change only when a YAML joins or leaves."""
     assert FAMILIES == {"mesh", "grid_sdf", "ddf", "ddf_paper", "neural_sdf", "gan_sdf"}
     assert SAMPLERS == set(plugins.members("sampling", "sampling")) == {"random", "pov", "surface"}
     assert set(plugins.members("model", "default")) == {"mesh", "mesh_lod2000", "mesh_lod500", "grid_sdf",
