@@ -106,6 +106,13 @@ def find_records(root: str) -> list[dict[str, Any]]:
 CODE_PATHS = ("ddfbench", "conf", "pyproject.toml")  # what a result depends on (reports/, README do not count)
 
 
+def code_commits(records: list[dict[str, Any]]) -> list[str]:
+    """The distinct code commits of the records: env.code_sha (the last commit that changed the code), else
+    env.git_sha for older records ("unknown" where a record has neither)."""
+    env = [r.get("env") or {} for r in records]
+    return sorted({str(e.get("code_sha") or e.get("git_sha") or "unknown") for e in env})
+
+
 def _git(*args: str) -> str | None:
     try:
         root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))

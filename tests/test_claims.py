@@ -129,6 +129,14 @@ def test_report_command_writes_claims_md(tmp_path):
     assert len(rows) == len(claims.evaluate(records())) and all(line.count(" | ") == 6 for line in rows)
 
 
+def test_claims_md_names_the_code_commit_not_a_reports_only_head():
+    recs = records()
+    for r in recs["representations"]:  # HEAD moved by a reports-only commit after the code commit c0de
+        r["env"] = {**r["env"], "git_sha": "4ead", "code_sha": "c0de"}
+    text = claims.to_markdown(claims.evaluate(recs), recs, "results")
+    assert "(code: abc, c0de)" in text and "4ead" not in text
+
+
 def render_matched(loose_warm_s, device="cuda"):
     """neural_sdf with a loose tracer: depth error 0.015 (below the DDF's 0.02) at loose_warm_s."""
     out = []

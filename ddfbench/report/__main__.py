@@ -33,7 +33,7 @@ from ddfbench.report.gallery import write_gallery
 from ddfbench.report.paired import paired_report
 from ddfbench.report.plots import PLOTS, plots_for, write_plots
 from ddfbench.report.tables import summarize, to_csv, to_latex, to_markdown
-from ddfbench.runs import find_records
+from ddfbench.runs import code_commits, find_records
 
 
 def _experiment(records: list[dict[str, Any]], records_dir: str) -> str:
@@ -57,13 +57,6 @@ def _sweep_lines(records_dir: str, sweep: list[str] | None) -> list[str]:
 
 class MixedCommits(ValueError):
     """Records of one report come from more than one code commit."""
-
-
-def code_commits(records: list[dict[str, Any]]) -> list[str]:
-    """The distinct code commits of the records: env.code_sha (the last commit that changed the code), else
-    env.git_sha for older records ("unknown" where a record has neither)."""
-    env = [r.get("env") or {} for r in records]
-    return sorted({str(e.get("code_sha") or e.get("git_sha") or "unknown") for e in env})
 
 
 SOURCE_OF_KIND = {

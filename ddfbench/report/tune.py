@@ -24,8 +24,7 @@ import pandas as pd
 
 from ddfbench import plugins
 from ddfbench.metric_registry import objective_value
-from ddfbench.report.__main__ import code_commits
-from ddfbench.runs import find_records
+from ddfbench.runs import code_commits, find_records
 from ddfbench.tune import search_space
 
 OBJECTIVE = "chamfer_l2"  # conf/experiment/tune.yaml `objective`
