@@ -1,6 +1,6 @@
 """Directed distance field (DDF): an MLP phi(x, theta) -> distance along theta, plus visibility.
 
-Modules: network (DDFNet, the checked config), rays (box entry, normals), fit (labels and training),
+Modules: network (DDFNet, the checked config), line_grid (the optional line encoding), rays (box entry, normals), fit (labels and training),
 mesh (extraction), family (the Representation: queries and the artifact).
 
 A ray (origin o, unit direction d) is answered with one network query at the
@@ -23,7 +23,9 @@ cfg keys (conf/model/ddf.yaml documents each):
             param ("point": x as given | "ray": x split into the foot point of its line
             and the coordinate s0 = x.d along it; the net then predicts where along the
             line the hit lies, which is constant along a ray), pos_freqs, dir_freqs
-            (positional-encoding octaves; 0 = raw input)
+            (positional-encoding octaves; 0 = raw input), line_grid_points (K > 0: the MLP also reads
+            a multiresolution feature grid at K points along the line's chord through the box;
+            line_grid_levels, _features, _base, _finest, _log2_size shape it: see line_grid)
   heads     visibility ("head": a logit trained with cross entropy | "clamp": no head,
             hit where the clamped distance stays below clamp_hit_ratio * delta, as in the paper)
   loss      loss ("l1" | "clamp" | "clamp_misses", with delta: ddfbench.models.ddf.fit.clamp_loss), vis_weight, entry_share (share of each batch drawn

@@ -37,7 +37,7 @@ class DDF(Representation):
     def __init__(self, cfg: Mapping[str, Any], domain: float = BOX_HALF):
         super().__init__(cfg, domain)
         self.device = "cpu"
-        self.net = DDFNet(self.cfg)
+        self.net = DDFNet(self.cfg, self.domain)
         self.net.eval()
 
     # ---- queries --------------------------------------------------------------------------------

@@ -52,7 +52,7 @@ def fit(rep: Representation, data: FitData, budget: Budget, probe: Probe | None 
         raise InputError("model ddf: the sample set is empty")
     seed_everything(budget.seed)
     rep.device = budget.device
-    rep.net = DDFNet(rep.cfg).to(rep.device)
+    rep.net = DDFNet(rep.cfg, rep.domain).to(rep.device)
     dev = rep.device
     x = torch.as_tensor(s.x, dtype=torch.float32, device=dev)
     d = torch.as_tensor(s.d, dtype=torch.float32, device=dev)

@@ -10,7 +10,8 @@ from torch import nn
 
 from ddfbench import plugins
 from ddfbench.errors import InputError
-from ddfbench.geometry import FourierFeatures
+from ddfbench.geometry import BOX_HALF, FourierFeatures
+from ddfbench.models.ddf.line_grid import LineGrid
 
 _CHOICES = {"activation": ("relu", "softplus"), "direction": ("vector", "angles"), "param": ("point", "ray"),
             "visibility": ("head", "clamp"), "loss": ("l1", "clamp", "clamp_misses"), "storage_dtype": ("float32", "float16"),
@@ -27,6 +28,12 @@ def checked_config(cfg: Mapping[str, Any]) -> dict[str, Any]:
                 "mesh_keep", "mesh_rank", "mesh_coarse"):
         if int(out[key]) < 1:
             raise InputError(f"model.{key} {out[key]}: must be a positive integer")
+    for key in ("line_grid_points", "line_grid_levels", "line_grid_features", "line_grid_base", "line_grid_finest",
+                "line_grid_log2_size"):
+        if int(out[key]) < (0 if key == "line_grid_points" else 1):
+            raise InputError(f"model.{key} {out[key]}: must be a {'non-negative' if key == 'line_grid_points' else 'positive'} integer")
+    if int(out["line_grid_finest"]) < int(out["line_grid_base"]):
+        raise InputError(f"model.line_grid_finest {out['line_grid_finest']}: must be >= line_grid_base {out['line_grid_base']}")
     if not 0.0 <= float(out["entry_share"]) < 1.0:
         raise InputError(f"model.entry_share {out['entry_share']}: must be in [0, 1)")
     for key in ("mesh_band", "mesh_lipschitz"):
@@ -40,9 +47,12 @@ def checked_config(cfg: Mapping[str, Any]) -> dict[str, Any]:
 
 
 class DDFNet(nn.Module):
-    """phi(x, d) for x (N,3), unit d (N,3) -> (distance (N,), visibility logit (N,) or None)."""
+    """phi(x, d) for x (N,3), unit d (N,3) -> (distance (N,), visibility logit (N,) or None).
 
-    def __init__(self, cfg: Mapping[str, Any]):
+    With line_grid_points K > 0 the MLP also reads LineGrid features of the line through x (grid over
+    the field box [-half, half]^3)."""
+
+    def __init__(self, cfg: Mapping[str, Any], half: float = BOX_HALF):
         super().__init__()
         self.param, self.direction = cfg["param"], cfg["direction"]
         self.pos_pe, self.dir_pe = FourierFeatures(cfg["pos_freqs"], math.pi), FourierFeatures(cfg["dir_freqs"], math.pi)
@@ -50,7 +60,10 @@ class DDFNet(nn.Module):
         n_dir = self.dir_pe.out_dim(3 if self.direction == "vector" else 2)
         n_out = 2 if cfg["visibility"] == "head" else 1
         act = {"relu": nn.ReLU, "softplus": lambda: nn.Softplus(beta=100)}[cfg["activation"]]
-        layers, n_in = [], n_pos + n_dir
+        self.grid = (LineGrid(cfg["line_grid_points"], cfg["line_grid_levels"], cfg["line_grid_features"],
+                              cfg["line_grid_base"], cfg["line_grid_finest"], cfg["line_grid_log2_size"], half)
+                     if int(cfg["line_grid_points"]) > 0 else None)
+        layers, n_in = [], n_pos + n_dir + (self.grid.out_dim() if self.grid is not None else 0)
         for _ in range(int(cfg["depth"])):
             lin = nn.Linear(n_in, int(cfg["width"]))
             layers += [nn.utils.parametrizations.weight_norm(lin) if cfg["weight_norm"] else lin, act()]
@@ -71,6 +84,9 @@ class DDFNet(nn.Module):
             dirs = torch.cat([polar, torch.atan2(d[:, 1:2], d[:, 0:1])], -1)
         else:
             dirs = d
-        y = self.out(self.body(torch.cat([self.pos_pe(pos), self.dir_pe(dirs)], -1)))
+        inputs = [self.pos_pe(pos), self.dir_pe(dirs)]
+        if self.grid is not None:
+            inputs.append(self.grid(x - (x * d).sum(-1, keepdim=True) * d, d))
+        y = self.out(self.body(torch.cat(inputs, -1)))
         dist = y[:, 0] - s0[:, 0] if self.param == "ray" else y[:, 0]
         return dist, (y[:, 1] if y.shape[1] > 1 else None)
