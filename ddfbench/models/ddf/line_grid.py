@@ -49,7 +49,7 @@ class LineGrid(nn.Module):
         res = [max(1, round(base * growth**level)) for level in range(levels)]
         self.register_buffer("res", torch.tensor(res, dtype=torch.int64), persistent=False)
         self.n_dense = sum((r + 1) ** 3 <= self.size for r in res)  # res grows, so the dense levels come first
-        side = torch.tensor([[1, r + 1, (r + 1) ** 2] for r in res[: self.n_dense]], dtype=torch.int32)
+        side = torch.tensor([[1, r + 1, (r + 1) ** 2] for r in res[: self.n_dense]], dtype=torch.int32).reshape(-1, 3)
         self.register_buffer("dense_mult", side[:, None, :, None], persistent=False)                 # (Ld,1,3,1)
         self.register_buffer("primes", torch.tensor(_PRIMES, dtype=torch.int64)[:, None], persistent=False)  # (3,1)
         self.register_buffer("offsets", (torch.arange(levels, dtype=torch.int64) * self.size)[:, None, None],
@@ -69,7 +69,7 @@ class LineGrid(nn.Module):
         unit = ((q.clamp(-self.half, self.half) + self.half) / (2 * self.half))[None]  # (1,M,3) in [0,1]
         res = self.res[:, None, None]                                                  # (L,1,1)
         c = unit * res                                                                 # (L,M,3)
-        i0 = torch.minimum(c.detach().floor().int(), res.int() - 1)
+        i0 = torch.minimum(c.detach().nan_to_num(0.0).floor().clamp_min(0).int(), res.int() - 1)  # NaN: node 0, NaN weights
         w = c - i0
         nodes = torch.stack([i0, i0 + 1], -1)                                          # (L,M,3,2) int32
         cw = _corners(torch.stack([1 - w, w], -1), torch.mul)                          # (L,M,8)

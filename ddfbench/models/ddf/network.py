@@ -32,6 +32,8 @@ def checked_config(cfg: Mapping[str, Any]) -> dict[str, Any]:
                 "line_grid_log2_size"):
         if int(out[key]) < (0 if key == "line_grid_points" else 1):
             raise InputError(f"model.{key} {out[key]}: must be a {'non-negative' if key == 'line_grid_points' else 'positive'} integer")
+    if int(out["line_grid_log2_size"]) > 24:
+        raise InputError(f"model.line_grid_log2_size {out['line_grid_log2_size']}: at most 24 (2^24 entries a level)")
     if int(out["line_grid_finest"]) < int(out["line_grid_base"]):
         raise InputError(f"model.line_grid_finest {out['line_grid_finest']}: must be >= line_grid_base {out['line_grid_base']}")
     if not 0.0 <= float(out["entry_share"]) < 1.0:
