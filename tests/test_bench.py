@@ -58,6 +58,8 @@ def test_each_issue_comparison_is_present(small_run):
     assert len(rows["grid"]) == 2 and len(rows["metrics"]) == 2
     assert {r.split(":")[0] for r in rows["training"]} == {"ddf", "neural_sdf", "gan_sdf"}
     assert any(": fit seconds" in r for r in rows["end_to_end"])
+    assert [r.split(":")[0] for r in rows["field_cost"][:2]] == [f"gan_sdf generator, {c} points a call" for c in (64, 256)]
+    assert all("dense fp32 matrix product" in r for r in rows["field_cost"][2:]) and len(rows["field_cost"]) == 4
     assert not any(": sampling seconds" in r for r in rows["end_to_end"])  # the small run is a mesh: no samples
 
 
@@ -146,3 +148,17 @@ def test_compare_orients_ratios_and_checks_targets():
     assert r.ratio == 4.0 and r.met is True
     r = compare("s", "m", 1.2, "s", "ref", 0.5, device="cpu", threads=1, target=Target("<=", 1.5, on="value"))
     assert r.met is True and r.target == "<= 1.5 s"
+
+
+def test_flops_per_point_counts_linear_and_conv_multiply_adds():
+    from torch import nn
+
+    from ddfbench.bench.field_cost import flops_per_point
+    from ddfbench.models.gan_sdf import generator
+
+    mlp = nn.Sequential(nn.Linear(3, 10), nn.ReLU(), nn.Linear(10, 4), nn.Linear(4, 1))
+    assert flops_per_point(mlp) == 2 * (30 + 40 + 4)
+    # the thesis generator: Linear 3->256; Conv1d 1->16, k 7 on 256 (250 out); pool 3 (248); Conv1d 16->32,
+    # k 5 (244 out); pool 3 (242); Linear 32*242 -> 1
+    macs = 3 * 256 + 16 * 250 * 7 + 32 * 244 * 16 * 5 + 32 * 242
+    assert flops_per_point(generator()) == 2 * macs

@@ -11,10 +11,12 @@ same process (DESIGN.md, timing rules). One module per section:
 8. end_to_end   the default run and the smoke sweep, wall time per stage
 9. race         DDF (fp32, bf16, compiled) vs Warp BVH vs Embree on all cores vs sphere tracing, same rays,
                 each with its accuracy; ray-count sweep; the four DDF capacities (run by default on CUDA only)
+10. field_cost  points/s of the GAN-SDF generator per eval chunk vs the neural SDF's field, and each
+                network's GFLOP/s vs a dense matrix product
 
 Each section module has `run(ctx: Context) -> SectionResult`; timing.py measures, results.py holds
 the rows, sizes.py the problem sizes, table.py writes the outputs.
 """
 
-SECTIONS = ("sampling", "oracle", "ddf", "tracing", "grid", "metrics", "training", "end_to_end", "race")
+SECTIONS = ("sampling", "oracle", "ddf", "tracing", "grid", "metrics", "training", "end_to_end", "race", "field_cost")
 CUDA_ONLY_BY_DEFAULT = ("race",)  # left out of a --device cpu run unless --only names it

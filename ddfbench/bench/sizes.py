@@ -22,6 +22,8 @@ SIZES: dict[str, dict[str, dict]] = {
                  "sweep": [1000, 4000, 16_000, 64_000, 256_000, 1 << 20, 1 << 22, 1 << 24], "embree_max": 1 << 24,
                  "fit_seconds": 25.0, "n_samples": 200_000, "grid_resolution": 128, "chunk": 1 << 21,
                  "compile": True, "capacities": True, "model": {}, "neural": {}},
+        "field_cost": {"points": 8192, "chunks": [64, 128, 256, 512, 1024, 4096], "gemm": 2048,
+                       "sdf_preset": "neural_sdf_tuned", "gan_preset": "gan_sdf_tuned"},
     },
     "small": {
         "sampling": {"shape": "sphere", "face_mode": "total", "s_fc": 1, "s_dr": 2, "s_p": 2, "bare_rays": 20_000},
@@ -41,5 +43,7 @@ SIZES: dict[str, dict[str, dict]] = {
         "race": {"shape": "sphere", "px": 12, "incoherent_rays": 300, "sweep": [100, 400], "embree_max": 100,
                  "fit_seconds": 0.3, "n_samples": 3000, "grid_resolution": 16, "chunk": 128, "compile": False,
                  "capacities": True, "model": {"batch": 256}, "neural": {"width": 16, "depth": 2, "batch": 256}},
+        "field_cost": {"points": 256, "chunks": [64, 256], "gemm": 128,
+                       "sdf_preset": "neural_sdf_tuned", "gan_preset": "gan_sdf_tuned"},
     },
 }

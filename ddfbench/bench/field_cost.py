@@ -1,0 +1,86 @@
+"""Section 10, field cost: what one point of a network SDF costs to evaluate, and how close to the CPU's
+matrix-product speed each network gets, measured side by side in one process.
+
+Figures (no grad, random points in the field box, `threads` torch threads):
+- the GAN-SDF generator (the thesis' Conv1d stack) on `points` points at each eval chunk in `chunks`
+  (points per call): points/s against the tuned neural SDF's field on one call of 65,536 points (the
+  SDF families' batch);
+- each network's achieved GFLOP/s (multiply-adds of its Linear and Conv1d layers x 2 per point, from
+  `flops_per_point`) against a dense fp32 matrix product of side `gemm` on the same threads, the speed a
+  well-shaped product reaches here.
+A sphere-traced frame costs (field evaluations) x (time a point), so the two rates and a render's
+evaluation counts (record `counts.field_evals`) bound the render-time ratio of the two families.
+Sizes: points, chunks, gemm, sdf_preset, gan_preset.
+"""
+
+from __future__ import annotations
+
+import torch
+from torch import nn
+
+from ddfbench.bench.context import DOMAIN, Context, model_preset
+from ddfbench.bench.results import SectionResult, compare
+from ddfbench.bench.timing import measure_side_by_side
+from ddfbench.models import load_family
+
+SDF_BATCH = 65536  # points a call of the SDF families' field (ddfbench.models._sdf_family)
+
+
+def flops_per_point(net: nn.Module, in_dim: int = 3) -> int:
+    """2 x the multiply-adds of every Linear and Conv1d layer for one input point (activations, pooling
+    and encodings not counted), read from the layer shapes during one forward pass."""
+    macs = [0]
+
+    def count(module: nn.Module, _inputs, output: torch.Tensor) -> None:
+        if isinstance(module, nn.Linear):
+            macs[0] += module.in_features * module.out_features * (output.numel() // output.shape[-1])
+        elif isinstance(module, nn.Conv1d):  # output (1, out_channels, L_out)
+            macs[0] += output.numel() * module.in_channels // module.groups * module.kernel_size[0]
+
+    hooks = [m.register_forward_hook(count) for m in net.modules() if isinstance(m, (nn.Linear, nn.Conv1d))]
+    try:
+        with torch.no_grad():
+            net(torch.zeros(1, in_dim))
+    finally:
+        for h in hooks:
+            h.remove()
+    return 2 * macs[0]
+
+
+def run(ctx: Context) -> SectionResult:
+    s, result = ctx.sizes, SectionResult()
+    n, side = int(s["points"]), int(s["gemm"])
+    sdf = load_family("neural_sdf")(model_preset(s["sdf_preset"]))
+    gan = load_family("gan_sdf")(model_preset(s["gan_preset"]))
+    gen = torch.Generator().manual_seed(0)
+    points = (torch.rand(n, 3, generator=gen) * 2 - 1) * DOMAIN
+    sdf_points = (torch.rand(SDF_BATCH, 3, generator=gen) * 2 - 1) * DOMAIN
+    a, b = torch.rand(side, side, generator=gen), torch.rand(side, side, generator=gen)
+
+    def gan_at(chunk: int):
+        def fn():
+            gan.eval_batch = chunk
+            return gan.field(points)
+        return fn
+
+    fns = {"sdf": lambda: sdf.field(sdf_points),
+           "gemm": lambda: a @ b, **{f"gan@{c}": gan_at(int(c)) for c in s["chunks"]}}
+    with torch.no_grad():
+        timed = measure_side_by_side(fns, ctx.repeats, ctx.warmup, ctx.device)
+    flops = {"sdf": flops_per_point(sdf.net), "gan": flops_per_point(gan.net)}
+    gemm_gflops = 2 * side**3 / timed["gemm"][1].median_s / 1e9
+    sdf_rate = timed["sdf"][1].rate(SDF_BATCH)
+    kw = dict(device=ctx.device, threads=ctx.threads)
+    result.details = {"flops_per_point": flops, "points": n, "gemm_side": side, "gemm_gflops": gemm_gflops,
+                      "timings": {name: t.as_dict() for name, (_, t) in timed.items()}}
+    for c in s["chunks"]:
+        result.rows.append(compare(
+            "field_cost", f"gan_sdf generator, {c} points a call: points/s", timed[f"gan@{c}"][1].rate(n), "points/s",
+            f"{s['sdf_preset']} field, {SDF_BATCH} points a call, points/s", sdf_rate, **kw))
+    best = max(s["chunks"], key=lambda c: timed[f"gan@{c}"][1].rate(n))
+    for name, label, rate in (("sdf", f"{s['sdf_preset']} field ({SDF_BATCH} a call)", sdf_rate),
+                              ("gan", f"gan_sdf generator ({best} a call, its fastest)", timed[f"gan@{best}"][1].rate(n))):
+        result.rows.append(compare(
+            "field_cost", f"{label}: GFLOP/s ({flops[name]:,} FLOP a point)", rate * flops[name] / 1e9, "GFLOP/s",
+            f"dense fp32 matrix product {side}x{side}, GFLOP/s", gemm_gflops, **kw))
+    return result
