@@ -22,8 +22,7 @@ from ddfbench.bench.context import DOMAIN, Context, model_preset
 from ddfbench.bench.results import SectionResult, compare
 from ddfbench.bench.timing import measure_side_by_side
 from ddfbench.models import load_family
-
-SDF_BATCH = 65536  # points a call of the SDF families' field (ddfbench.models._sdf_family)
+from ddfbench.models._sdf_family import FIELD_BATCH as SDF_BATCH  # points a call of the SDF families' field
 
 
 def flops_per_point(net: nn.Module, in_dim: int = 3) -> int:

@@ -22,7 +22,7 @@ from ddfbench.geometry import BOX_HALF
 from ddfbench.representation import Hits, Representation
 from ddfbench.trace import TraceOptions, autograd_normals, sphere_trace, to_hits
 
-_BATCH = 65536  # points per field call when evaluating numpy arrays
+FIELD_BATCH = 65536  # points per field call when evaluating numpy arrays
 
 
 class SDFFamily(Representation):
@@ -48,13 +48,13 @@ class SDFFamily(Representation):
         p = np.asarray(points, np.float32).reshape(-1, 3)
         out = np.empty(len(p), np.float32)
         with torch.no_grad():
-            for s in range(0, len(p), _BATCH):
-                x = torch.from_numpy(p[s : s + _BATCH]).to(self.device)
-                out[s : s + _BATCH] = self.field(x).reshape(-1).float().cpu().numpy()
+            for s in range(0, len(p), FIELD_BATCH):
+                x = torch.from_numpy(p[s : s + FIELD_BATCH]).to(self.device)
+                out[s : s + FIELD_BATCH] = self.field(x).reshape(-1).float().cpu().numpy()
         return out
 
     def _batched_field(self, points: torch.Tensor) -> torch.Tensor:
-        return torch.cat([self.field(points[s : s + _BATCH]).reshape(-1) for s in range(0, len(points), _BATCH)]) \
+        return torch.cat([self.field(points[s : s + FIELD_BATCH]).reshape(-1) for s in range(0, len(points), FIELD_BATCH)]) \
             if len(points) else points.new_zeros(0)
 
     def intersect(self, origins: np.ndarray, directions: np.ndarray, normals: bool = True) -> Hits:

@@ -3,8 +3,8 @@
 G: Linear(3->256) -> Conv1d(1,16,7) -> MaxPool1d(3,1) -> Tanh -> Conv1d(16,32,5) -> MaxPool1d(3,1)
    -> ReLU -> Linear(7744->1). D: the same on (x, y, z, sdf) with LeakyReLU(0.2) after the second
    stage and a sigmoid output (thesis Appendix B). Evaluation runs eval_batch points per call (the
-   Conv1d stack is 2.2x slower a point at 1024 points a call than at 128 on one CPU thread; the SDF
-   families otherwise pass 65,536 points).
+   Conv1d stack is 1.7x slower a point at 1024 points a call than at 128 on one CPU thread,
+   reports/bench/field_cost; the SDF families otherwise pass 65,536 points).
 
 Target scale: the thesis fits a bunny about 4 units long (its level-set grid spans 4.1 units,
 Appendix C); ours lives in the unit cube. G is trained on targets L = target_scale * sdf and
