@@ -281,6 +281,19 @@ def test_equal_values_are_not_marked_and_empty_reconstructions_are_counted():
     assert "**" not in md.split("\n\n")[0] and "1 (1 empty)" in md and "defined penalty" in md
 
 
+def test_a_value_defined_in_fewer_runs_than_n_says_over_how_many():
+    recs = [make_record(seed=s, chamfer=1e-3 * (1 + s)) for s in range(3)]
+    for r, mae in zip(recs, (2e-3, 4e-3, None)):  # the third render hit no pixel the reference hit
+        r["metrics"]["depth_mae"] = mae
+    df = tables.summarize(recs)
+    assert df.loc[0, "n"] == 3 and df.loc[0, "depth_mae_n"] == 2 and df.loc[0, "chamfer_l2_n"] == 3
+    assert df.loc[0, "depth_mae_mean"] == pytest.approx(3e-3)
+    md = tables.to_markdown(df)
+    row = md.splitlines()[2]
+    assert row.count("(of 2)") == 1 and "3 ± 1.4 (of 2)" in row and "defined in k of the row's n runs" in md
+    assert "depth_mae_n" not in md and "(of " not in tables.to_markdown(tables.summarize(recs[:2]))
+
+
 def test_records_from_mixed_commits_are_refused_unless_allowed(tmp_path):
     recs = [make_record(seed=0), make_record(seed=1)]
     recs[1]["env"] = {"git_sha": "def"}

@@ -156,6 +156,7 @@ def summarize(records: Iterable[dict[str, Any]]) -> pd.DataFrame:
             summary = summarize_values(m[name] for m in ok)
             entry[f"{name}_mean"], entry[f"{name}_std"] = summary.mean, summary.std
             entry[f"{name}_ci_lo"], entry[f"{name}_ci_hi"] = summary.lo, summary.hi
+            entry[f"{name}_n"] = summary.n  # runs that define it: fewer than n where a run has none (NaN)
         for name in _floor_metrics():
             vals = np.array([m[f"noise_floor_{name}"] for m in members], dtype=float)
             vals = vals[np.isfinite(vals)]
@@ -198,8 +199,14 @@ def _shown_metrics(df: pd.DataFrame) -> list[str]:
 
 
 def _label_columns(df: pd.DataFrame) -> list[str]:
-    hidden = {"n", "n_failed", "n_expected", "n_empty", "not_converged", "errors", "keys"}
+    hidden = {"n", "n_failed", "n_expected", "n_empty", "not_converged", "errors", "keys"} | {f"{m}_n" for m in _metrics()}
     return [c for c in df.columns if not c.endswith(("_mean", "_std", "_ci_lo", "_ci_hi")) and c not in hidden]
+
+
+def _defined_in(row: pd.Series, metric: str) -> str:
+    """' (of k)' when the metric is defined in fewer of the row's runs than n (k > 0), else ''."""
+    k = row.get(f"{metric}_n")
+    return f" (of {int(k)})" if k is not None and 0 < k < row["n"] else ""
 
 
 def marks(df: pd.DataFrame, metric: str) -> pd.Series:
@@ -251,7 +258,7 @@ def _cells(df: pd.DataFrame, bold: tuple[str, str]) -> tuple[list[str], list[lis
             if row.get("not_converged") and registry[m].penalty is not None:
                 cells.append("–")  # a penalty, not a measurement (table.csv keeps it)
                 continue
-            text = _fmt(row[f"{m}_mean"], row[f"{m}_std"], registry[m].scale)
+            text = _fmt(row[f"{m}_mean"], row[f"{m}_std"], registry[m].scale) + _defined_in(row, m)
             cells.append(f"{bold[0]}{text}{bold[1]}" if mark[m][i] == "best" else
                          f"{text} {TIE}" if mark[m][i] == "tie" else text)
         body.append(cells)
@@ -264,12 +271,20 @@ def _cells(df: pd.DataFrame, bold: tuple[str, str]) -> tuple[list[str], list[lis
     return header, body
 
 
+def _partial_metrics(df: pd.DataFrame) -> bool:
+    """Whether a shown metric of some row is defined in fewer of its runs than n."""
+    return any(_defined_in(row, m) for _, row in df.iterrows() for m in _shown_metrics(df))
+
+
 def _footnotes(df: pd.DataFrame) -> list[str]:
     lines = []
     if (df["n"] < df["n_expected"]).any():
         lines.append(f"{INCOMPLETE} fewer ok runs than the fullest row: its mean is over the ok runs only.")
     if "n_empty" in df and (df["n_empty"] > 0).any():
         lines.append("(k empty): k runs gave an empty reconstruction; their geometry metrics are the defined penalty.")
+    if _partial_metrics(df):
+        lines.append("(of k): the value is defined in k of the row's n runs (a depth error needs pixels that both "
+                     "the render and the reference hit); its mean, std and interval are over those k.")
     if "not_converged" in df and df["not_converged"].astype(bool).any():
         lines.append(f"{NOT_CONVERGED}: every run's reconstruction was empty, so the row is not a method result: its "
                      "geometry cells are blank (table.csv keeps the penalty), it is not ranked, and its steps and "
