@@ -111,6 +111,7 @@ def test_every_claim_has_a_row_with_a_verdict():
     ({"render_time": render_time("cuda")}, f"DDF renders faster than {claims.SDF}", claims.NOT_TESTABLE, claims.CONFIRMED),
     ({"render_time": render_time("cuda")}, "DDF renders faster than mesh", claims.NOT_TESTABLE, claims.REFUTED),
     ({"storage": storage(2e6)}, "G < mesh < grid SDF in storage", claims.CONFIRMED, claims.REFUTED),
+    ({"storage": storage(60e3)}, "the generator G stores in ~47 KB", claims.CONFIRMED, claims.REFUTED),
 ])
 def test_a_verdict_flips_when_the_numbers_do(change, claim, before, after):
     assert verdicts(records())[claim] == before
