@@ -29,10 +29,11 @@ KINDS = ("log", "float", "int", "choice")
 def search_space(model: str) -> dict[str, tuple[str, list[Any]]]:
     """{config path: (kind, values)} that conf/model/<model>.yaml declares under `experiments.tune`.
 
-    A malformed entry (unknown kind, bounds not increasing, a key the model does not have) is a one-line
-    InputError naming the file and the entry.
+    A malformed entry (unknown kind, bounds not increasing, a key the model does not have, or one a preset
+    leaves to its family's YAML, which Hydra's override could not set) is a one-line InputError naming
+    the file and the entry.
     """
-    known = plugins.model_defaults(model)
+    known, own = plugins.model_defaults(model), plugins.defaults("model", model)
     out: dict[str, tuple[str, list[Any]]] = {}
     for path, dist in plugins.levels("model", model, EXPERIMENT).items():
         where = f"conf/model/{model}.yaml: experiments.{EXPERIMENT}.{path}"
@@ -47,6 +48,9 @@ def search_space(model: str) -> dict[str, tuple[str, list[Any]]]:
         group, _, key = str(path).partition(".")
         if group != "model" or key.split(".")[0] not in known:
             raise InputError(f"{where}: not a key of the model (known: model.{', model.'.join(sorted(known))})")
+        if key.split(".")[0] not in own:  # the sweeper's `model.<key>=` override cannot add a key to the preset
+            raise InputError(f"{where}: the preset leaves it to its family's YAML, so the study's override cannot "
+                             f"set it; give it in this file (e.g. {key.split('.')[0]}: {known[key.split('.')[0]]!r})")
         out[str(path)] = (kind, values)
     return out
 

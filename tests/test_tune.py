@@ -38,6 +38,17 @@ def test_a_malformed_space_is_one_line_naming_the_file_and_entry(monkeypatch, sp
     assert "conf/model/ddf.yaml: experiments.tune." in text and message in text and "\n" not in text
 
 
+def test_a_preset_must_hold_each_key_its_study_draws(monkeypatch):
+    # ddf_tuned gives no lr_schedule (its family's YAML does): the sweeper's `model.lr_schedule=` override
+    # would fail in every trial, so the space is refused up front, naming the key and the file to set it in
+    monkeypatch.setattr(plugins, "levels", lambda group, name, experiment: {"model.lr_schedule": {"choice": ["cosine"]}})
+    with pytest.raises(InputError) as err:
+        tune.search_space("ddf_tuned")
+    text = str(err.value)
+    assert "conf/model/ddf_tuned.yaml: experiments.tune.model.lr_schedule" in text and "\n" not in text and "lr_schedule: 'cosine'" in text
+    assert tune.search_space("ddf") == {"model.lr_schedule": ("choice", ["cosine"])}  # ddf.yaml holds it
+
+
 def test_suggest_draws_every_key_inside_its_declared_range():
     from omegaconf import OmegaConf
 
