@@ -46,11 +46,12 @@ def search_space(model: str) -> dict[str, tuple[str, list[Any]]]:
         if kind != "choice" and (len(values) != 2 or not values[0] < values[1] or (kind == "log" and values[0] <= 0)):
             raise InputError(f"{where}: {kind} needs [low, high] with 0 {'<' if kind == 'log' else '<='} low < high, got {values}")
         group, _, key = str(path).partition(".")
-        if group != "model" or key.split(".")[0] not in known:
+        top = key.split(".")[0]
+        if group != "model" or top not in known:
             raise InputError(f"{where}: not a key of the model (known: model.{', model.'.join(sorted(known))})")
-        if key.split(".")[0] not in own:  # the sweeper's `model.<key>=` override cannot add a key to the preset
+        if top not in own:  # the sweeper's `model.<key>=` override cannot add a key to the preset
             raise InputError(f"{where}: the preset leaves it to its family's YAML, so the study's override cannot "
-                             f"set it; give it in this file (e.g. {key.split('.')[0]}: {known[key.split('.')[0]]!r})")
+                             f"set it; give it in this file (e.g. {top}: {known[top]!r})")
         out[str(path)] = (kind, values)
     return out
 

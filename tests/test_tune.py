@@ -1,4 +1,4 @@
-"""`+experiment=tune`: search spaces read from the family YAMLs, trials drawn inside them, the objective a
+"""`+experiment=tune`: search spaces read from the model YAMLs, trials drawn inside them, the objective a
 job returns, and the study's report and resumption."""
 
 import math
