@@ -313,16 +313,17 @@ def test_bad_config_and_samples_raise_input_errors(sphere_oracle):
 
 
 def test_paper_lr_preset_is_the_paper_preset_but_for_its_named_deviations():
-    """conf/model/ddf_paper_lr.yaml changes only what its comment names (lr, batch, loss, dropout); ddf_paper stays as written.
+    """conf/model/ddf_paper_lr.yaml changes only what its comment names (lr, batch, loss, dropout, position
+    encoding); ddf_paper stays as written.
     (Its fit_steps budget and the experiments it joins are about the runs, not the model.)"""
     from hydra import compose, initialize_config_dir
 
     with initialize_config_dir(config_dir=os.path.abspath(CONF), version_base="1.3"):
         paper = OmegaConf.to_container(compose(config_name="ddf_paper"))
         trainable = OmegaConf.to_container(compose(config_name="ddf_paper_lr"))
-    assert paper["lr"] == 1e-7 and trainable["lr"] == 1e-4
+    assert paper["lr"] == 1e-7 and trainable["lr"] == 1e-3
     about_runs = {"fit_steps", "experiments"}
-    assert {k for k in paper if paper[k] != trainable.get(k)} - about_runs == {"lr", "batch", "loss", "dropout"}
+    assert {k for k in paper if paper[k] != trainable.get(k)} - about_runs == {"lr", "batch", "loss", "dropout", "pos_freqs"}
     assert trainable.keys() == paper.keys()
 
 
