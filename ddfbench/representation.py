@@ -12,7 +12,7 @@ import json
 import os
 import pickle
 from dataclasses import dataclass, field
-from typing import Any, Callable, ClassVar, Mapping
+from typing import TYPE_CHECKING, Any, Callable, ClassVar, Mapping
 
 import numpy as np
 import trimesh
@@ -20,6 +20,9 @@ import trimesh
 from ddfbench import plugins
 from ddfbench.errors import InputError
 from ddfbench.geometry import BOX_HALF
+
+if TYPE_CHECKING:  # for the annotation only: ddfbench.checkpoint imports torch
+    from ddfbench.checkpoint import Checkpoint
 
 
 class RayStatus(enum.IntEnum):
@@ -69,6 +72,7 @@ class Budget:
     device: str = "cpu"
     seed: int = 0
     n_probes: int = 6  # log-spaced accuracy probes along the budget
+    checkpoint: Checkpoint | None = None  # where the fit saves itself and resumes from (ddfbench.checkpoint)
 
 
 @dataclass

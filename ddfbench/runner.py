@@ -19,6 +19,7 @@ import torch
 
 from ddfbench import plugins, runs
 from ddfbench.budget import fit_limit, fit_record
+from ddfbench.checkpoint import FILE as CHECKPOINT_FILE, Checkpoint
 from ddfbench.errors import InputError
 from ddfbench.geometry import BOX_HALF
 from ddfbench.metrics import cloud_metrics, geometry_metrics, penalty_metrics, sample_surface
@@ -99,8 +100,11 @@ def _stages(cfg: Mapping[str, Any], rdir: str, device: str, seed: int, out: dict
     rep = Family(dict(cfg["model"]), domain=domain)
     n_labels = info.get("n_samples")
     limit = fit_limit(tr, cfg["model"], n_labels)
+    every = float(cfg.get("checkpoint_every", 0) or 0)
     budget = Budget(max_steps=limit.max_steps, max_seconds=limit.max_seconds, device=device,
-                    seed=seed, n_probes=int(tr.get("n_probes", 5)))
+                    seed=seed, n_probes=int(tr.get("n_probes", 5)),
+                    checkpoint=Checkpoint(os.path.join(rdir, CHECKPOINT_FILE), every, str(out["env"].get("code_sha")))
+                    if every > 0 else None)
     gt_probe_points = sample_surface(shape.mesh, int(tr.get("probe_points", 5000)), seed + 7)[0]
     probe_res = min(int(tr.get("probe_resolution", 48)), int(ev["mesh_resolution"]))
     probe = _probe_fn(gt_probe_points, probe_res, radii)
@@ -210,5 +214,7 @@ def run(cfg: Mapping[str, Any], choices: Mapping[str, str] | None = None,
         log.error("run %s failed: %s", key, out["error"])
     out["finished"] = _now()
     runs.write_json_atomic(rpath, out)
+    Checkpoint(os.path.join(rdir, CHECKPOINT_FILE)).remove()  # the record holds the fit now; an interrupted
+    # process (no record) keeps it, so the rerun of the same job resumes its fit
     track_record(cfg.get("tracking"), str(cfg.get("out_dir", "results")), out, rdir)
     return out

@@ -21,7 +21,8 @@ from typing import Any, Mapping
 SCHEMA_VERSION = 1
 
 # Top-level config keys that do not change results: paths, resume flags, worker counts, logging, tracking.
-NON_SEMANTIC_KEYS = ("out_dir", "force", "threads", "quiet", "experiment_name", "hydra", "tracking", "objective")
+NON_SEMANTIC_KEYS = ("out_dir", "force", "threads", "quiet", "experiment_name", "hydra", "tracking", "objective",
+                     "checkpoint_every")
 
 RECORD_FIELDS = (
     "schema_version", "key", "status", "error", "experiment", "family", "model", "shape", "sampling",

@@ -17,6 +17,9 @@ log-spaced fractions of the budget (progress = max(step share, time share)),
 the last one always at the end. The learning-rate schedule runs on that same
 progress, so a wall-clock-limited run still decays to its final rate.
 
+Checkpoints: with budget.checkpoint set, the loop saves its whole state every checkpoint.every_s
+seconds of training and a fit given a saved state of itself goes on from it (ddfbench.checkpoint).
+
 NaN guard: a non-finite loss (checked every step) or non-finite weights
 (checked every `weight_check_every` steps and at the end) stops the run;
 FitStats.status is "failed" and FitStats.message names the step and the reason.
@@ -35,6 +38,7 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
+from ddfbench.checkpoint import restore, rng_state, set_rng_state, state_of
 from ddfbench.errors import InputError
 from ddfbench.representation import Budget, FitStats
 
@@ -125,6 +129,12 @@ class _LossCurve:
                 self.rows = self.rows[1::2]
                 self.window *= 2
 
+    def state(self) -> dict[str, Any]:
+        return {"rows": list(self.rows), "window": self.window, "sum": self._sum, "n": self._n}
+
+    def restore(self, state: Mapping[str, Any]) -> None:
+        self.rows, self.window, self._sum, self._n = list(state["rows"]), state["window"], state["sum"], state["n"]
+
     def flush(self, step: int, seconds: float) -> None:
         if self._n:
             self.rows.append((step, seconds, self._sum / self._n))
@@ -154,13 +164,16 @@ def train_loop(
     weight_check_every: int = 50,
     desc: str = "fit",
     quiet: bool | None = None,
+    state: Mapping[str, Any] | None = None,
 ) -> FitStats:
     """Train `module` with `optimizer` on losses from `step_fn` until the budget is spent.
 
     Returns FitStats: steps, seconds (training only), loss_curve [(step, seconds, mean loss)],
     probes [{"step", "seconds", **probe_fn()}], status "ok" | "failed" with message, and
-    extra {device, stop ("max_steps" | "max_seconds" | "nonfinite"), final_lr, probe_seconds}.
-    quiet=None shows the tqdm bar only when stderr is a terminal.
+    extra {device, stop ("max_steps" | "max_seconds" | "nonfinite"), final_lr, probe_seconds}, plus
+    resumed_at (the steps it went on from) when budget.checkpoint held a saved state of this fit.
+    quiet=None shows the tqdm bar only when stderr is a terminal. state: whatever else step_fn's
+    result depends on that a checkpoint must keep, by name (another optimizer, a torch.Generator).
     """
     if budget.max_steps < 1 or budget.max_seconds <= 0:
         raise InputError(f"train budget max_steps={budget.max_steps}, max_seconds={budget.max_seconds}: both must be > 0")
@@ -179,6 +192,19 @@ def train_loop(
     pending: list[torch.Tensor] = []
     train_s, probe_s, step, stop = 0.0, 0.0, 0, "max_steps"
     window_t0 = None
+    saved = {"module": module, "optimizer": optimizer, **(state or {})}
+    fit_label = f"{desc} seed {budget.seed} max_steps {budget.max_steps}"
+    ckpt = budget.checkpoint
+    resumed = ckpt.load(fit_label) if ckpt is not None else None
+    if resumed is not None:
+        restore(saved, resumed["objects"])
+        set_rng_state(resumed["rng"])
+        step, train_s, probe_s, fractions = resumed["step"], resumed["train_s"], resumed["probe_s"], resumed["fractions"]
+        curve.restore(resumed["curve"])
+        stats.probes = resumed["probes"]
+        stats.extra["resumed_at"] = [*resumed["resumed_at"], step]
+        bar.update(step)
+    last_save = train_s
     module.train()
     while step < budget.max_steps:
         progress = max(step / budget.max_steps, train_s / budget.max_seconds)
@@ -227,6 +253,11 @@ def train_loop(
         while fractions and progress >= fractions[0] and progress < 1.0:
             fractions.pop(0)
             probe_s += _run_probe(module, probe_fn, stats, step, train_s)
+        if ckpt is not None and train_s - last_save >= ckpt.every_s and step < budget.max_steps:
+            last_save = train_s
+            ckpt.save({"fit": fit_label, "objects": state_of(saved), "rng": rng_state(), "step": step,
+                       "train_s": train_s, "probe_s": probe_s, "fractions": fractions, "curve": curve.state(),
+                       "probes": stats.probes, "resumed_at": stats.extra.get("resumed_at", [])})
     bar.close()
 
     if stats.status == "ok" and (bad := _first_nonfinite_param(module)) is not None:

@@ -190,7 +190,8 @@ class GanSDF(NetSDFFamily):
         grad_clip = cfg.get("grad_clip")
         stats = train_loop(both, opt_g, step_fn, budget, Schedule.from_cfg(cfg),
                            (lambda: probe(self)) if probe is not None else None,
-                           grad_clip=float(grad_clip) if grad_clip else None, desc="gan_sdf")
+                           grad_clip=float(grad_clip) if grad_clip else None, desc="gan_sdf",
+                           state={"optimizer_d": opt_d})
         stats.extra.update(n_params=self.n_params(), epochs=stats.steps * batch / len(x))
         return stats
 

@@ -93,7 +93,7 @@ def fit(rep: Representation, data: FitData, budget: Budget, probe: Probe | None 
     stats = train_loop(
         rep.net, optimizer, step_fn, budget, Schedule.from_cfg(cfg),
         probe_fn=(lambda: probe(rep)) if probe is not None else None,
-        grad_clip=float(cfg["grad_clip"]) or None, desc="ddf",
+        grad_clip=float(cfg["grad_clip"]) or None, desc="ddf", state={"batches": gen},
     )
     stats.extra.update(n_samples=n, hit_share=float(s.hit.mean()), n_params=rep.n_params())
     return stats
