@@ -152,7 +152,7 @@ def test_gan_sdf_levels_set_its_fit_steps_and_others_keep_their_models(experimen
 
 
 SEEDS = {"representations": 5, "ablation": 3, "ablation_grid": 3, "sampling": 3, "storage": 3, "pareto": 3,
-         "render_time": 3}
+         "render_time": 3, "gan_epochs": 5}
 
 
 @pytest.mark.parametrize("experiment,n_seeds", SEEDS.items())
