@@ -9,14 +9,18 @@ the step, the training and probe seconds, the loss curve, the probes taken and t
 A fit given the same checkpoint loads it and goes on: on the same machine, code and thread count the
 result is bit-identical to an uninterrupted fit's (tests/test_checkpoint.py).
 
-A file written by other code (its `tag`, the runner's code commit) or for another fit is not
-loaded: the fit starts over and says so in the log. The runner keeps the file at
-<run dir>/fit_checkpoint.pt and deletes it once the run's record is written; the record's
-fit.resumed_at lists the steps a fit resumed from.
+A file written by other code (its `tag`: code_fingerprint(), a hash of the package's source, so an
+uncommitted edit counts), for another fit (the loop's label: family, seed, steps, device, threads,
+torch version) or one that cannot be read is not loaded: the fit starts over and says so in the log.
+A save that fails is logged and the fit goes on. The runner keeps the file at
+<run dir>/fit_checkpoint.pt and deletes it once the run's record is written (and before a force=true
+rerun); the record's fit.resumed_at lists the steps a fit resumed from.
 """
 
 from __future__ import annotations
 
+import glob
+import hashlib
 import logging
 import os
 import random
@@ -41,28 +45,52 @@ class Checkpoint:
     tag: str = ""
 
     def save(self, state: Mapping[str, Any]) -> None:
-        """Write `state` with this checkpoint's tag: a temporary file, then an atomic rename."""
-        tmp = f"{self.path}.tmp"
-        torch.save({"format": FORMAT, "tag": self.tag, **state}, tmp)
-        os.replace(tmp, self.path)
+        """Write `state` with this checkpoint's tag: a temporary file of this process, synced, then an atomic
+        rename. A failure is logged, not raised: the fit goes on without that save."""
+        tmp = f"{self.path}.{os.getpid()}.tmp"
+        try:
+            with open(tmp, "wb") as fh:
+                torch.save({"format": FORMAT, "tag": self.tag, **state}, fh)
+                fh.flush()
+                os.fsync(fh.fileno())
+            os.replace(tmp, self.path)
+        except OSError as exc:
+            log.warning("%s: checkpoint not saved (%s); the fit goes on", self.path, exc)
+            if os.path.exists(tmp):
+                os.remove(tmp)
 
     def load(self, fit: str) -> dict[str, Any] | None:
-        """The saved state of fit `fit` (a label of what is trained), or None: no file, or one written by
-        other code or for another fit (logged; the fit then starts over)."""
+        """The saved state of fit `fit` (the loop's label of what is trained), or None: no file, one that
+        cannot be read, or one written by other code or for another fit (logged; the fit starts over)."""
         if not os.path.exists(self.path):
             return None
-        state = torch.load(self.path, map_location="cpu", weights_only=False)
-        mine = state.get("format") == FORMAT and state.get("tag") == self.tag and state.get("fit") == fit
-        if not mine:
-            log.warning("%s: written for %s by code %s, not %s by %s: the fit starts over", self.path,
-                        state.get("fit"), state.get("tag"), fit, self.tag)
+        try:  # our own file in the run folder: it holds python and numpy RNG states, not only tensors
+            state = torch.load(self.path, map_location="cpu", weights_only=False)
+        except Exception as exc:  # truncated or corrupt: start over rather than fail the run
+            log.warning("%s: unreadable (%s): the fit starts over", self.path, exc)
+            return None
+        if not isinstance(state, dict) or state.get("format") != FORMAT or state.get("tag") != self.tag \
+                or state.get("fit") != fit:
+            got = (state.get("fit"), state.get("tag")) if isinstance(state, dict) else (None, None)
+            log.warning("%s: written for %s by code %s, not %s by %s: the fit starts over", self.path, *got, fit, self.tag)
             return None
         return state
 
     def remove(self) -> None:
-        for path in (self.path, f"{self.path}.tmp"):
+        """Delete the checkpoint and any temporary file a killed save left."""
+        for path in (self.path, *glob.glob(f"{glob.escape(self.path)}.*.tmp")):
             if os.path.exists(path):
                 os.remove(path)
+
+
+def code_fingerprint(package: str = os.path.dirname(os.path.abspath(__file__))) -> str:
+    """16 hex chars: sha256 over the package's .py files (relative path and bytes, sorted): the code a fit ran."""
+    h = hashlib.sha256()
+    for path in sorted(glob.glob(os.path.join(package, "**", "*.py"), recursive=True)):
+        h.update(os.path.relpath(path, package).encode())
+        with open(path, "rb") as fh:
+            h.update(fh.read())
+    return h.hexdigest()[:16]
 
 
 def rng_state() -> dict[str, Any]:

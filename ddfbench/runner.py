@@ -19,7 +19,7 @@ import torch
 
 from ddfbench import plugins, runs
 from ddfbench.budget import fit_limit, fit_record
-from ddfbench.checkpoint import FILE as CHECKPOINT_FILE, Checkpoint
+from ddfbench.checkpoint import FILE as CHECKPOINT_FILE, Checkpoint, code_fingerprint
 from ddfbench.errors import InputError
 from ddfbench.geometry import BOX_HALF
 from ddfbench.metrics import cloud_metrics, geometry_metrics, penalty_metrics, sample_surface
@@ -103,8 +103,7 @@ def _stages(cfg: Mapping[str, Any], rdir: str, device: str, seed: int, out: dict
     every = float(cfg.get("checkpoint_every", 0) or 0)
     budget = Budget(max_steps=limit.max_steps, max_seconds=limit.max_seconds, device=device,
                     seed=seed, n_probes=int(tr.get("n_probes", 5)),
-                    checkpoint=Checkpoint(os.path.join(rdir, CHECKPOINT_FILE), every, str(out["env"].get("code_sha")))
-                    if every > 0 else None)
+                    checkpoint=Checkpoint(os.path.join(rdir, CHECKPOINT_FILE), every, code_fingerprint()) if every > 0 else None)
     gt_probe_points = sample_surface(shape.mesh, int(tr.get("probe_points", 5000)), seed + 7)[0]
     probe_res = min(int(tr.get("probe_resolution", 48)), int(ev["mesh_resolution"]))
     probe = _probe_fn(gt_probe_points, probe_res, radii)
@@ -185,6 +184,8 @@ def run(cfg: Mapping[str, Any], choices: Mapping[str, str] | None = None,
         track_record(cfg.get("tracking"), str(cfg.get("out_dir", "results")), record, rdir)  # no-op if logged
         return record
 
+    if cfg.get("force", False):  # a forced rerun starts its fit over
+        Checkpoint(os.path.join(rdir, CHECKPOINT_FILE)).remove()
     seed = int(cfg.get("seed", 0))
     threads = _set_threads(int(cfg.get("threads", 0)))
     scene = dict(cfg.get("scene") or {})

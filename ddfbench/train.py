@@ -193,7 +193,14 @@ def train_loop(
     train_s, probe_s, step, stop = 0.0, 0.0, 0, "max_steps"
     window_t0 = None
     saved = {"module": module, "optimizer": optimizer, **(state or {})}
-    fit_label = f"{desc} seed {budget.seed} max_steps {budget.max_steps}"
+
+    def save() -> None:
+        ckpt.save({"fit": fit_label, "objects": state_of(saved), "rng": rng_state(), "step": step,
+                   "train_s": train_s, "probe_s": probe_s, "fractions": fractions, "curve": curve.state(),
+                   "probes": stats.probes, "resumed_at": stats.extra.get("resumed_at", [])})
+
+    fit_label = (f"{desc} seed {budget.seed} max_steps {budget.max_steps} on {budget.device}, "
+                 f"{torch.get_num_threads()} threads, torch {torch.__version__}")  # what a resume must match
     ckpt = budget.checkpoint
     resumed = ckpt.load(fit_label) if ckpt is not None else None
     if resumed is not None:
@@ -255,9 +262,7 @@ def train_loop(
             probe_s += _run_probe(module, probe_fn, stats, step, train_s)
         if ckpt is not None and train_s - last_save >= ckpt.every_s and step < budget.max_steps:
             last_save = train_s
-            ckpt.save({"fit": fit_label, "objects": state_of(saved), "rng": rng_state(), "step": step,
-                       "train_s": train_s, "probe_s": probe_s, "fractions": fractions, "curve": curve.state(),
-                       "probes": stats.probes, "resumed_at": stats.extra.get("resumed_at", [])})
+            save()
     bar.close()
 
     if stats.status == "ok" and (bad := _first_nonfinite_param(module)) is not None:
@@ -266,6 +271,9 @@ def train_loop(
     curve.flush(step, train_s)
     if fractions and stats.status == "ok":
         probe_s += _run_probe(module, probe_fn, stats, step, train_s)
+        fractions.clear()
+    if ckpt is not None and stats.status == "ok":
+        save()  # the finished fit: a run killed later (mesh, metrics) does not train again
     module.eval()
     stats.steps, stats.seconds, stats.loss_curve = step, train_s, curve.rows
     stats.extra.update(stop=stop, final_lr=float(optimizer.param_groups[0]["lr"]), probe_seconds=probe_s)

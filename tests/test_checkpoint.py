@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 import torch
 
-from ddfbench.checkpoint import Checkpoint
+from ddfbench.checkpoint import Checkpoint, code_fingerprint
 from ddfbench.models import load_family
 from ddfbench.oracle import Oracle
 from ddfbench.representation import Budget, FitData
@@ -102,9 +102,33 @@ def test_a_checkpoint_of_other_code_or_of_another_fit_is_not_loaded(data, tmp_pa
     assert "resumed_at" not in other_fit.extra
 
 
+def test_an_unreadable_checkpoint_starts_the_fit_over_and_a_finished_fit_is_not_trained_again(data, tmp_path):
+    path = tmp_path / "fit.pt"
+    path.write_bytes(b"cut short by a crash")
+    _, fresh = fit("neural_sdf", data)
+    ckpt = Checkpoint(str(path), every_s=1e9, tag="code-a")  # no save along the fit: only the final one
+    rep, over = fit("neural_sdf", data, ckpt)
+    assert "resumed_at" not in over.extra and losses(over) == losses(fresh)
+    again_rep, again = fit("neural_sdf", data, ckpt, stop_at_probe=1)  # a probe would interrupt: none runs
+    assert again.extra["resumed_at"] == [STEPS] and losses(again) == losses(over) and again.probes == over.probes
+    a, b = weights(again_rep), weights(rep)
+    assert all(torch.equal(a[k], b[k]) for k in a)
+
+
+def test_the_code_fingerprint_follows_the_source(tmp_path):
+    (tmp_path / "sub").mkdir()
+    (tmp_path / "a.py").write_text("x = 1\n")
+    (tmp_path / "sub" / "b.py").write_text("y = 2\n")
+    before = code_fingerprint(str(tmp_path))
+    assert code_fingerprint(str(tmp_path)) == before and len(before) == 16
+    (tmp_path / "sub" / "b.py").write_text("y = 3\n")
+    assert code_fingerprint(str(tmp_path)) != before
+    assert code_fingerprint() != before  # the package's own source
+
+
 TINY = ["-m", "model=neural_sdf", "shape=sphere", "eval=smoke", "eval.n_points=2000", "eval.mesh_resolution=20",
         "scene=none", "sampling=random", "sampling.n_samples=4000", "train.budget=steps", "train.max_steps=400",
-        "train.n_probes=0", "model.batch=2048", "threads=1", "quiet=true"]
+        "train.n_probes=0", "model.batch=2048", "train.device=cpu", "threads=1", "quiet=true"]
 
 
 def run_cli(out_dir, *extra, kill_when_checkpointed=False):
