@@ -112,7 +112,7 @@ def write_report(records_dir: str, out_dir: str, note: str | None = None,
         with open(os.path.join(out_dir, "paired.md"), "w") as fh:
             fh.write(pairs)
     extra = [pairs] if pairs is not None else []
-    if experiment in ("convergence", "paper_ddf"):
+    if experiment in ("convergence", "paper_ddf", "gan_epochs"):
         rows = convergence.time_to_floor_rows(records)
         extra.append("## Time to reach the noise floor\n\n" + convergence.to_markdown(rows))
         with open(os.path.join(out_dir, "time_to_floor.md"), "w") as fh:

@@ -45,6 +45,7 @@ PLOTS_BY_EXPERIMENT: dict[str, tuple[str, ...]] = {
     "smoke": ("fit_curves", "pareto", "sampling", "render_time", "ablation"),
     "convergence": ("convergence", "fit_curves"),
     "paper_ddf": ("convergence", "fit_curves"),
+    "gan_epochs": ("convergence", "fit_curves"),
     "render_matched": ("render_time",),
     "tune": ("fit_curves",),  # plus reports/tune/tune.png by ddfbench.report.tune
 }
