@@ -12,9 +12,11 @@ result is bit-identical to an uninterrupted fit's (tests/test_checkpoint.py).
 A file written by other code (its `tag`: code_fingerprint(), a hash of the package's source, so an
 uncommitted edit counts), for another fit (the loop's label: family, seed, steps, device, threads,
 torch version) or one that cannot be read is not loaded: the fit starts over and says so in the log.
-A save that fails is logged and the fit goes on. The runner keeps the file at
-<run dir>/fit_checkpoint.pt and deletes it once the run's record is written (and before a force=true
-rerun); the record's fit.resumed_at lists the steps a fit resumed from.
+A save that fails is logged and the fit goes on. The file holds tensors, numbers, strings and
+containers only, and is read with weights_only=True (DESIGN.md, Safety). The runner keeps it at
+<run dir>/fit_checkpoint.pt and deletes it once an ok record is written (and before a force=true rerun):
+a run that failed after its fit resumes from the finished fit. The record's fit.resumed_at lists the
+steps a fit resumed from.
 """
 
 from __future__ import annotations
@@ -33,7 +35,7 @@ import torch
 log = logging.getLogger(__name__)
 
 FILE = "fit_checkpoint.pt"
-FORMAT = 1
+FORMAT = 2  # 2: loaded with weights_only=True (numpy RNG key as a list of ints)
 
 
 @dataclass(frozen=True)
@@ -54,7 +56,7 @@ class Checkpoint:
                 fh.flush()
                 os.fsync(fh.fileno())
             os.replace(tmp, self.path)
-        except OSError as exc:
+        except Exception as exc:  # a full disk, or a family's state that cannot be serialized
             log.warning("%s: checkpoint not saved (%s); the fit goes on", self.path, exc)
             if os.path.exists(tmp):
                 os.remove(tmp)
@@ -64,9 +66,9 @@ class Checkpoint:
         cannot be read, or one written by other code or for another fit (logged; the fit starts over)."""
         if not os.path.exists(self.path):
             return None
-        try:  # our own file in the run folder: it holds python and numpy RNG states, not only tensors
-            state = torch.load(self.path, map_location="cpu", weights_only=False)
-        except Exception as exc:  # truncated or corrupt: start over rather than fail the run
+        try:  # tensors, numbers, strings and containers only: a results folder may come from someone else
+            state = torch.load(self.path, map_location="cpu", weights_only=True)
+        except Exception as exc:  # truncated, corrupt or holding other objects: start over rather than fail the run
             log.warning("%s: unreadable (%s): the fit starts over", self.path, exc)
             return None
         if not isinstance(state, dict) or state.get("format") != FORMAT or state.get("tag") != self.tag \
@@ -93,17 +95,24 @@ def code_fingerprint(package: str = os.path.dirname(os.path.abspath(__file__))) 
     return h.hexdigest()[:16]
 
 
-def rng_state() -> dict[str, Any]:
-    """The global random generators' states: python, numpy, torch CPU (and CUDA where there is one)."""
-    return {"python": random.getstate(), "numpy": np.random.get_state(), "torch": torch.get_rng_state(),
-            "cuda": torch.cuda.get_rng_state_all() if torch.cuda.is_available() else None}
+def rng_state(device: str = "cpu") -> dict[str, Any]:
+    """The global random generators' states: python, numpy (its MT19937 key as 624 ints, so the file loads
+    with weights_only), torch CPU, and torch CUDA for a fit on `device` "cuda…" only (reading it would
+    start a CUDA context in every CPU fit on a GPU machine)."""
+    numpy = np.random.get_state(legacy=False)
+    numpy["state"] = {"key": numpy["state"]["key"].tolist(), "pos": int(numpy["state"]["pos"])}
+    return {"python": random.getstate(), "numpy": numpy, "torch": torch.get_rng_state(),
+            "cuda": torch.cuda.get_rng_state_all() if device.startswith("cuda") else None}
 
 
 def set_rng_state(state: Mapping[str, Any]) -> None:
+    """Put back the generators' states that rng_state returned."""
     random.setstate(state["python"])
-    np.random.set_state(state["numpy"])
+    numpy = dict(state["numpy"])
+    numpy["state"] = {"key": np.asarray(numpy["state"]["key"], dtype=np.uint32), "pos": numpy["state"]["pos"]}
+    np.random.set_state(numpy)
     torch.set_rng_state(state["torch"])
-    if state.get("cuda") is not None and torch.cuda.is_available():
+    if state.get("cuda") is not None:
         torch.cuda.set_rng_state_all(state["cuda"])
 
 

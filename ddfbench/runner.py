@@ -215,7 +215,7 @@ def run(cfg: Mapping[str, Any], choices: Mapping[str, str] | None = None,
         log.error("run %s failed: %s", key, out["error"])
     out["finished"] = _now()
     runs.write_json_atomic(rpath, out)
-    Checkpoint(os.path.join(rdir, CHECKPOINT_FILE)).remove()  # the record holds the fit now; an interrupted
-    # process (no record) keeps it, so the rerun of the same job resumes its fit
+    if out["status"] == "ok":  # the record holds the fit now. A failed record (rerun by the next sweep) and
+        Checkpoint(os.path.join(rdir, CHECKPOINT_FILE)).remove()  # a killed process keep it: the rerun resumes
     track_record(cfg.get("tracking"), str(cfg.get("out_dir", "results")), out, rdir)
     return out

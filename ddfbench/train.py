@@ -195,7 +195,7 @@ def train_loop(
     saved = {"module": module, "optimizer": optimizer, **(state or {})}
 
     def save() -> None:
-        ckpt.save({"fit": fit_label, "objects": state_of(saved), "rng": rng_state(), "step": step,
+        ckpt.save({"fit": fit_label, "objects": state_of(saved), "rng": rng_state(budget.device), "step": step,
                    "train_s": train_s, "probe_s": probe_s, "fractions": fractions, "curve": curve.state(),
                    "probes": stats.probes, "resumed_at": stats.extra.get("resumed_at", [])})
 

@@ -11,8 +11,12 @@ import time
 import numpy as np
 import pytest
 import torch
+from hydra import compose, initialize_config_dir
+from omegaconf import OmegaConf
 
-from ddfbench.checkpoint import Checkpoint, code_fingerprint
+import ddfbench
+from ddfbench import CONF_DIR, runner
+from ddfbench.checkpoint import FILE, Checkpoint, code_fingerprint
 from ddfbench.models import load_family
 from ddfbench.oracle import Oracle
 from ddfbench.representation import Budget, FitData
@@ -123,7 +127,20 @@ def test_the_code_fingerprint_follows_the_source(tmp_path):
     assert code_fingerprint(str(tmp_path)) == before and len(before) == 16
     (tmp_path / "sub" / "b.py").write_text("y = 3\n")
     assert code_fingerprint(str(tmp_path)) != before
-    assert code_fingerprint() != before  # the package's own source
+    assert code_fingerprint() == code_fingerprint(os.path.dirname(ddfbench.__file__))  # by default: ddfbench's own
+
+
+class Stranger:
+    """An object a results folder from someone else could smuggle into a checkpoint."""
+
+
+def test_a_checkpoint_holding_anything_but_tensors_numbers_and_containers_is_not_loaded(tmp_path):
+    ckpt = Checkpoint(str(tmp_path / "fit.pt"), tag="code-a")
+    state = {"fit": "f", "step": 3, "rng": {"key": [1, 2, 3]}, "w": torch.ones(2)}
+    ckpt.save(state)
+    assert ckpt.load("f")["step"] == 3
+    ckpt.save({**state, "extra": Stranger()})  # unpickling it would run a stranger's code
+    assert ckpt.load("f") is None
 
 
 TINY = ["-m", "model=neural_sdf", "shape=sphere", "eval=smoke", "eval.n_points=2000", "eval.mesh_resolution=20",
@@ -155,7 +172,26 @@ def test_a_killed_run_rerun_goes_on_from_its_checkpoint_and_the_record_says_so(t
     run_cli(tmp_path / "killed", "checkpoint_every=0.5")
     (straight,), (resumed,) = find_records(str(tmp_path / "straight")), find_records(str(tmp_path / "killed"))
     assert resumed["key"] == straight["key"]  # checkpoint_every does not change what the run computes
-    assert resumed["status"] == "ok" and resumed["fit"]["resumed_at"] and "resumed_at" not in straight["fit"]
+    assert resumed["status"] == "ok" and "resumed_at" not in straight["fit"]
+    assert 0 < resumed["fit"]["resumed_at"][0] < 400  # killed mid-fit, not after its final save
     assert [r[::2] for r in resumed["fit"]["loss_curve"]] == [r[::2] for r in straight["fit"]["loss_curve"]]
     assert resumed["metrics"] == straight["metrics"]
     assert not [f for _, _, files in os.walk(tmp_path) for f in files if f.startswith("fit_checkpoint")]
+
+
+def test_a_run_that_fails_after_its_fit_keeps_the_checkpoint_and_its_rerun_does_not_train_again(tmp_path, monkeypatch):
+    with initialize_config_dir(CONF_DIR, version_base="1.3"):
+        cfg = OmegaConf.to_container(compose("config", overrides=[*TINY[1:], "train.max_steps=40", "eval.noise_floor=false",
+                                                                  f"out_dir={tmp_path}"]), resolve=True)
+
+    def full_disk(*args, **kwargs):
+        raise OSError("No space left on device")
+
+    with monkeypatch.context() as patch:
+        patch.setattr(runner, "geometry_metrics", full_disk)
+        failed = runner.run(cfg)
+    assert failed["status"] == "failed" and failed["fit"]["status"] == "ok"
+    assert [f for _, _, files in os.walk(tmp_path) for f in files if f == FILE]
+    rerun = runner.run(cfg)
+    assert rerun["status"] == "ok" and rerun["fit"]["resumed_at"] == [40]
+    assert not [f for _, _, files in os.walk(tmp_path) for f in files if f == FILE]
