@@ -97,6 +97,7 @@ class Schedule:
         )
 
     def factor(self, progress: float) -> float:
+        """The learning-rate multiplier at `progress` (fraction of the budget spent, clipped to [0, 1])."""
         p = min(max(progress, 0.0), 1.0)
         ramp = min(1.0, p / self.warmup) if self.warmup > 0 else 1.0
         if self.kind == "cosine":
