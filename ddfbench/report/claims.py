@@ -84,13 +84,6 @@ def below(s: Summary, bound: float) -> str:
     return CONFIRMED if s.hi < bound else REFUTED if s.lo > bound else NOT_SEPARABLE
 
 
-def all_of(verdicts: list[str]) -> str:
-    """Several conditions that must all hold: refuted if any is, confirmed if all are."""
-    if REFUTED in verdicts:
-        return REFUTED
-    return CONFIRMED if verdicts and all(v == CONFIRMED for v in verdicts) else NOT_SEPARABLE
-
-
 def _missing(claim: str, source: str, paper: str, experiment: str) -> Claim:
     return Claim(claim, source, paper, "–", f"`{experiment}`", NO_RECORDS,
                  f"run `python -m ddfbench +experiment={experiment}` into the same results folder")

@@ -48,13 +48,6 @@ def _flatten(prefix: str, value: Any, out: dict[str, Any]) -> None:
         out[prefix] = json.dumps(value) if isinstance(value, list) else value
 
 
-def _num(value: Any) -> float:
-    try:
-        return float(value)
-    except (TypeError, ValueError):
-        return math.nan
-
-
 def override_labels(overrides: Iterable[str]) -> dict[str, str]:
     """{key: value} of a record's overrides, minus seeds and non-semantic keys (paths, threads, ...)."""
     out = {}
