@@ -216,11 +216,6 @@ def marks(df: pd.DataFrame, metric: str) -> pd.Series:
     return out
 
 
-def best_mask(df: pd.DataFrame, metric: str) -> pd.Series:
-    """True where a row's mean of `metric` is the best of its shape and separated from the rest."""
-    return marks(df, metric) == "best"
-
-
 def _fmt(mean: float, std: float, scale: float) -> str:
     if not math.isfinite(mean):
         return "–"
