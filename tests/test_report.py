@@ -1,4 +1,4 @@
-"""Report logic on synthetic records: Pareto front, seed pooling, flags, best marks, noise floor,
+"""Report logic on synthetic records: record readers, Pareto front, seed pooling, flags, best marks, noise floor,
 plot selection of points, and the files `python -m ddfbench.report` writes."""
 
 import io
@@ -12,7 +12,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from ddfbench.report import plots, tables
+from ddfbench.report import plots, records, tables
 from ddfbench.report.__main__ import main as report_main
 from ddfbench.runs import write_json_atomic
 
@@ -207,6 +207,18 @@ def test_markdown_latex_csv_render_the_same_numbers(tmp_path):
     assert tex.count("{") == tex.count("}") and tex.startswith(r"\begin{tabular}") and r"\end{tabular}" in tex
     body = [line for line in tex.splitlines() if line.endswith(r"\\")]
     assert len({line.count("&") for line in body}) == 1  # every row has as many cells as the header
+
+
+# ---------------------------------------------------------------- record readers
+
+def test_record_readers_skip_failed_runs_and_read_what_is_missing_as_nan():
+    ok, failed = make_record(shape="cow", chamfer=2e-3), make_record(seed=1, status="failed")
+    assert records.ok_records([failed, ok]) == [ok]
+    assert (records.shape_name(ok), records.shape_name({})) == ("cow", "None")
+    assert records.chamfer_l2(ok) == 2e-3 and math.isnan(records.chamfer_l2(failed))
+    assert records.chamfer_l2({"metrics": {"chamfer_l2": "inf"}}) == math.inf  # the writer's strict-JSON infinity
+    assert [records.as_float(v) for v in (3, "0.5", "inf")] == [3.0, 0.5, math.inf]
+    assert all(math.isnan(records.as_float(v)) for v in (None, "n/a", [1.0]))
 
 
 # ---------------------------------------------------------------- plot data
