@@ -56,10 +56,10 @@ def time_to_reach(t: np.ndarray, v: np.ndarray, threshold: float, better: str = 
     return float(t[np.argmax(hit)]) if hit.any() else math.inf
 
 
-def floor(records: Iterable[Record], shape: str, metric: str = "chamfer_l2") -> float:
-    """Mean noise floor of `metric` over the shape's records (NaN if none)."""
+def floor(records: Iterable[Record], shape: str | None = None, metric: str = "chamfer_l2") -> float:
+    """Mean noise floor of `metric` over the ok records of `shape` (of every shape where None; NaN if none)."""
     m = by_name()[metric]
-    vals = [m.read_floor(r) for r in ok_records(records) if shape_name(r) == shape]
+    vals = [m.read_floor(r) for r in ok_records(records) if shape is None or shape_name(r) == shape]
     vals = [v for v in vals if math.isfinite(v)]
     return float(np.mean(vals)) if vals else math.nan
 

@@ -71,13 +71,6 @@ def pareto_front(x: Iterable[float], y: Iterable[float]) -> np.ndarray:
     return np.array(front, dtype=int)
 
 
-def _floor(records: list[dict[str, Any]], shape: str | None = None) -> float:
-    vals = [as_float(((r.get("metrics") or {}).get("noise_floor") or {}).get("chamfer_l2")) for r in records
-            if shape is None or shape_name(r) == shape]
-    vals = [v for v in vals if math.isfinite(v)]
-    return float(np.mean(vals)) if vals else math.nan
-
-
 def _config_id(rec: dict[str, Any]) -> str:
     """The record's configuration, seeds pooled: its overrides minus seed=."""
     kept = [o for o in rec.get("overrides") or [] if not o.lstrip("+").startswith("seed=")]
@@ -155,7 +148,7 @@ def plot_fit_curves(records: list[dict[str, Any]], out_dir: str) -> list[str]:
             ax.plot(s[~empty], c[~empty], "o", ms=3, color=colors[key])
             ax.plot(s[empty], c[empty], "x", ms=5, color=colors[key])
             labelled.add(key)
-        _floor_line(ax, _floor(records, shape))
+        _floor_line(ax, convergence.floor(records, shape))
         ax.set(xscale="log", yscale="log", xlabel="fit time (s)", ylabel="chamfer L2 (probe; × = empty mesh, penalty)",
                title=shape)
         ax.grid(True, which="both", alpha=0.3)
@@ -200,7 +193,7 @@ def plot_pareto(records: list[dict[str, Any]], out_dir: str) -> list[str]:
             if len(front):
                 ax.plot([pts[i]["x"] for i in front], [pts[i]["y"] for i in front], "k-", lw=1, zorder=2,
                         label="Pareto front")
-            _floor_line(ax, _floor(records, shape))
+            _floor_line(ax, convergence.floor(records, shape))
             ax.set(xscale="log", yscale="log", xlabel=title, ylabel="chamfer L2 (× = empty mesh, penalty)", title=shape)
             ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
             ax.grid(True, which="both", alpha=0.3)
@@ -233,7 +226,7 @@ def plot_sampling(records: list[dict[str, Any]], out_dir: str) -> list[str]:
     for (model, strategy), pts in lines.items():
         n, y, e = zip(*pts)
         ax.errorbar(n, y, yerr=e, marker="o", ms=4, capsize=2, label=f"{model} {strategy}" if several_models else strategy)
-    _floor_line(ax, _floor(ok_records(records)))
+    _floor_line(ax, convergence.floor(records))
     ax.set(xscale="log", yscale="log", xlabel="training samples (labels)", ylabel="chamfer L2")
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=8)
@@ -295,7 +288,7 @@ def plot_ablation(records: list[dict[str, Any]], out_dir: str) -> list[str]:
     for factor, line in lines.items():
         lv, y, e = zip(*line)
         ax.errorbar(lv, y, yerr=e, marker="o", capsize=2, label=f"{factor} (the others at their base level)")
-    _floor_line(ax, _floor(ok_records(records)))
+    _floor_line(ax, convergence.floor(records))
     ax.set(yscale="log", xlabel="level (samples per point / face / direction)", ylabel="chamfer L2",
            title="surface sampling, one factor at a time")
     ax.grid(True, which="both", alpha=0.3)
