@@ -177,7 +177,7 @@ def run(cfg: Mapping[str, Any], choices: Mapping[str, str] | None = None,
     experiment = str(cfg.get("experiment_name", "single"))
     key = runs.config_key(cfg)
     rdir = runs.run_dir(str(cfg.get("out_dir", "results")), experiment, key)
-    rpath = os.path.join(rdir, "record.json")
+    rpath = runs.record_path(str(cfg.get("out_dir", "results")), experiment, key)
     if runs.is_done(rpath) and not cfg.get("force", False):
         log.debug("skip %s: ok record exists (force=true re-runs)", rpath)
         record = runs.read_record(rpath)

@@ -4,11 +4,12 @@ positive and consistent with the figures beside them. No timing assertions."""
 import importlib.util
 import json
 import math
+import time
 
 import pytest
 import torch
 
-from ddfbench.bench import CUDA_ONLY_BY_DEFAULT, SECTIONS
+from ddfbench.bench import CUDA_ONLY_BY_DEFAULT, SECTIONS, render_time
 from ddfbench.bench.__main__ import main
 from ddfbench.bench.results import Target, compare
 from ddfbench.bench.timing import measure, measure_side_by_side, precision_context
@@ -128,6 +129,22 @@ def test_side_by_side_interleaves_figure_and_reference():
     # cold calls, then a warm-up round and 3 timed rounds, each calling both, the order rotating
     assert order == ["a", "b", "a", "b", "b", "a", "a", "b", "b", "a"]
     assert all(len(t.runs_s) == 3 for _, t in timed.values())
+
+
+def test_render_time_row_times_the_first_render_apart_from_the_later_ones(monkeypatch):
+    calls = []
+
+    def fake_render(rep, scene, passes, seed):
+        calls.append(seed)
+        time.sleep(0.001)
+        return None, {"primary_rays": 10, "shadow_rays": 5, "bounce_rays": 1}
+
+    monkeypatch.setattr(render_time, "render", fake_render)
+    monkeypatch.setattr(render_time, "plan_passes", lambda scene: [])
+    row = render_time._row("fake", 0.5, rep=None, scene=None, renders=4)
+    assert len(calls) == 4 and len(row["seconds"]) == 4  # no untimed warm-up: every render is in the row
+    assert row["render_1_s"] == row["seconds"][0] and row["later_median_s"] == sorted(row["seconds"][1:])[1]
+    assert row["rays"] == 16 and row["rays_per_s"] == pytest.approx(16 / row["later_median_s"])
 
 
 def test_precision_context_switches_autocast_and_rejects_unknown():

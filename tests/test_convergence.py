@@ -38,6 +38,14 @@ def test_time_to_floor_median_over_seeds_and_not_reached():
     assert "| ddf | bunny | 3 | 0.01 | 10 (3/3) | 100 (3/3) |" in md and "not reached (1/3)" in md
 
 
+def test_floor_is_over_the_ok_records_of_one_shape_or_of_every_shape():
+    recs = [run("ddf", "bunny", 0, [(1, 1e-3)], floor=1e-5), run("ddf", "bone", 0, [(1, 1e-3)], floor=3e-5)]
+    recs.append({**run("ddf", "bunny", 1, [(1, 1e-3)], floor=1.0), "status": "failed"})
+    assert convergence.floor(recs, "bunny") == pytest.approx(1e-5)
+    assert convergence.floor(recs) == pytest.approx(2e-5)
+    assert math.isnan(convergence.floor(recs, "cow"))
+
+
 def test_report_writes_the_band_plot_and_the_time_to_floor_table(tmp_path):
     for shape in ("bunny", "bone"):
         for s in range(3):

@@ -1,4 +1,4 @@
-"""Report logic on synthetic records: Pareto front, seed pooling, flags, best marks, noise floor,
+"""Report logic on synthetic records: record readers, Pareto front, seed pooling, flags, best marks, noise floor,
 plot selection of points, and the files `python -m ddfbench.report` writes."""
 
 import io
@@ -12,7 +12,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from ddfbench.report import plots, tables
+from ddfbench.report import plots, records, tables
 from ddfbench.report.__main__ import main as report_main
 from ddfbench.runs import write_json_atomic
 
@@ -122,14 +122,13 @@ def seeded(shape, width, chamfer, spread=0.01):
 def test_best_is_marked_per_shape_and_per_direction():
     recs = seeded("bunny", 64, 3e-3) + seeded("bunny", 128, 1e-3) + seeded("cow", 64, 2e-3) + seeded("cow", 128, 4e-3)
     df = tables.summarize(recs)
-    best = tables.best_mask(df, "chamfer_l2")
-    winners = {(r["shape"], r["model.width"]) for (_, r), b in zip(df.iterrows(), best) if b}
-    assert winners == {("bunny", "128"), ("cow", "64")}
+    marked = {(r["shape"], r["model.width"]): m for (_, r), m in zip(df.iterrows(), tables.marks(df, "chamfer_l2")) if m}
+    assert marked == {("bunny", "128"): "best", ("cow", "64"): "best"}
     df.loc[:, "fscore@0.01_mean"] = [0.1, 0.9, 0.8, 0.2]
     df.loc[:, "fscore@0.01_ci_lo"] = df["fscore@0.01_mean"] - 0.01
     df.loc[:, "fscore@0.01_ci_hi"] = df["fscore@0.01_mean"] + 0.01
-    high = {(r["shape"], r["model.width"]) for (_, r), b in zip(df.iterrows(), tables.best_mask(df, "fscore@0.01")) if b}
-    assert high == {("bunny", "128"), ("cow", "64")}
+    high = {(r["shape"], r["model.width"]): m for (_, r), m in zip(df.iterrows(), tables.marks(df, "fscore@0.01")) if m}
+    assert high == {("bunny", "128"): "best", ("cow", "64"): "best"}
     lines = [line.strip("|").split(" | ") for line in tables.to_markdown(df).splitlines() if line.startswith("| ")]
     col = [c.strip() for c in lines[0]].index("CD-L2 ×10³")
     assert [row[col].strip().split(" ±")[0] for row in lines[1:5]] == ["3", "**1", "**2", "4"]  # x10^3, bold winners
@@ -210,6 +209,18 @@ def test_markdown_latex_csv_render_the_same_numbers(tmp_path):
     assert len({line.count("&") for line in body}) == 1  # every row has as many cells as the header
 
 
+# ---------------------------------------------------------------- record readers
+
+def test_record_readers_skip_failed_runs_and_read_what_is_missing_as_nan():
+    ok, failed = make_record(shape="cow", chamfer=2e-3), make_record(seed=1, status="failed")
+    assert records.ok_records([failed, ok]) == [ok]
+    assert (records.shape_name(ok), records.shape_name({})) == ("cow", "None")
+    assert records.chamfer_l2(ok) == 2e-3 and math.isnan(records.chamfer_l2(failed))
+    assert records.chamfer_l2({"metrics": {"chamfer_l2": "inf"}}) == math.inf  # the writer's strict-JSON infinity
+    assert [records.as_float(v) for v in (3, "0.5", "inf")] == [3.0, 0.5, math.inf]
+    assert all(math.isnan(records.as_float(v)) for v in (None, "n/a", [1.0]))
+
+
 # ---------------------------------------------------------------- plot data
 
 def surface(fc, dr, p):
@@ -275,7 +286,7 @@ def test_equal_values_are_not_marked_and_empty_reconstructions_are_counted():
     recs = [make_record(width=w, chamfer=8.64) for w in (64, 128)]
     recs[1]["metrics"]["empty_reconstruction"] = True
     df = tables.summarize(recs)
-    assert not tables.best_mask(df, "chamfer_l2").any()
+    assert (tables.marks(df, "chamfer_l2") == "").all()  # neither best nor tied
     assert sorted(df["n_empty"]) == [0, 1]
     md = tables.to_markdown(df)
     assert "**" not in md.split("\n\n")[0] and "1 (1 empty)" in md and "defined penalty" in md

@@ -18,7 +18,6 @@ import os
 import sys
 import time
 
-import numpy as np
 from hydra import compose, initialize_config_dir
 from omegaconf import OmegaConf
 
@@ -27,10 +26,9 @@ from ddfbench.models import load_family
 from ddfbench.oracle import Oracle
 from ddfbench.render.integrator import render
 from ddfbench.render.scene import parse_scene, plan_passes
-from ddfbench.render.timing import clock, compute_threads
+from ddfbench.render.timing import clock, compute_threads, time_renders
 from ddfbench.representation import Budget, FitData, Representation
 from ddfbench.shapes import load_shape
-
 
 
 def _config(group: str, name: str) -> dict:
@@ -45,18 +43,13 @@ def _mesh_rep(shape, faces: int) -> Representation:
 
 
 def _row(name: str, setup_s: float, rep: Representation, scene, renders: int) -> dict:
+    """One table row: `renders` renders of the scene, the first cold, no untimed warm-up (seconds)."""
     passes = plan_passes(scene)
-    seconds, counts = [], None
-    for _ in range(renders):
-        start = clock()
-        _, c = render(rep, scene, passes, seed=0)
-        seconds.append(clock() - start)
-        counts = counts or c
-    later = seconds[1:] or seconds
-    q1, median, q3 = np.percentile(later, [25, 50, 75])
+    (_, counts), timing = time_renders(lambda: render(rep, scene, passes, seed=0), repeats=renders - 1, warmup=0)
     rays = counts["primary_rays"] + counts["shadow_rays"] + counts["bounce_rays"]
-    return {"name": name, "setup_s": setup_s, "render_1_s": seconds[0], "later_median_s": float(median),
-            "later_iqr_s": float(q3 - q1), "rays": rays, "rays_per_s": rays / median, "seconds": seconds}
+    return {"name": name, "setup_s": setup_s, "render_1_s": timing.cold_s, "later_median_s": timing.warm_s,
+            "later_iqr_s": timing.warm_iqr_s, "rays": rays, "rays_per_s": rays / timing.warm_s,
+            "seconds": [timing.cold_s, *timing.warm_all_s]}
 
 
 def main(argv: list[str] | None = None) -> None:

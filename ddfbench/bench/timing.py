@@ -15,10 +15,9 @@ import contextlib
 from dataclasses import asdict, dataclass
 from typing import Any, Callable, Iterator, TypeVar
 
-import numpy as np
 import torch
 
-from ddfbench.render.timing import clock
+from ddfbench.render.timing import median_iqr, timed
 
 T = TypeVar("T")
 
@@ -43,12 +42,6 @@ class Timing:
         return asdict(self)
 
 
-def _timed(fn: Callable[[], T]) -> tuple[T, float]:
-    start = clock()
-    out = fn()
-    return out, clock() - start
-
-
 def measure_side_by_side(fns: dict[str, Callable[[], Any]], repeats: int, warmup: int = 1, device: str = "cpu",
                          precision: str = "fp32") -> dict[str, tuple[Any, Timing]]:
     """Cold call of each fn in order, `warmup` untimed rounds, `repeats` timed rounds (each fn once per
@@ -59,18 +52,17 @@ def measure_side_by_side(fns: dict[str, Callable[[], Any]], repeats: int, warmup
     names = list(fns)
     with precision_context(precision, device):
         for name in names:
-            cold[name] = _timed(fns[name])
+            cold[name] = timed(fns[name])
         for r in range(max(0, int(warmup)) + max(1, int(repeats))):
-            timed = r >= max(0, int(warmup))
+            counted = r >= max(0, int(warmup))
             for name in names[r % len(names):] + names[:r % len(names)]:  # rotate: no fn always goes first
-                seconds = _timed(fns[name])[1]
-                if timed:
+                seconds = timed(fns[name])[1]
+                if counted:
                     warm[name].append(seconds)
     out = {}
     for name, runs in warm.items():
-        q1, median, q3 = np.percentile(runs, [25, 50, 75])
-        out[name] = (cold[name][0], Timing(cold[name][1], float(median), float(q3 - q1), [float(r) for r in runs],
-                                           device, precision, torch.get_num_threads()))
+        out[name] = (cold[name][0], Timing(cold[name][1], *median_iqr(runs), runs, device, precision,
+                                           torch.get_num_threads()))
     return out
 
 
@@ -83,7 +75,7 @@ def measure(fn: Callable[[], T], repeats: int, warmup: int = 1, device: str = "c
 def once(fn: Callable[[], T], device: str = "cpu", precision: str = "fp32") -> tuple[T, Timing]:
     """A single timed call, for work too long to repeat (a sweep, a brute-force grid): cold = median, IQR 0."""
     with precision_context(precision, device):
-        out, seconds = _timed(fn)
+        out, seconds = timed(fn)
     return out, Timing(seconds, seconds, 0.0, [seconds], device, precision, torch.get_num_threads())
 
 

@@ -1,7 +1,8 @@
 """Render timing: the cold render (the first, with whatever setup the representation does lazily:
 BVH commit, weights to the device, kernel compilation) apart from warm renders (median and IQR of
 `repeats` renders after `warmup` untimed ones). When torch has CUDA in use, every clock read waits
-for the device (torch.cuda.synchronize), so queued kernels are counted.
+for the device (torch.cuda.synchronize), so queued kernels are counted. `timed` and `median_iqr`
+(one call's seconds; the warm median and IQR) serve ddfbench.bench.timing too.
 """
 
 from __future__ import annotations
@@ -35,6 +36,19 @@ def clock() -> float:
     return time.perf_counter()
 
 
+def timed(fn: Callable[[], T]) -> tuple[T, float]:
+    """(fn's result, its seconds on clock())."""
+    start = clock()
+    out = fn()
+    return out, clock() - start
+
+
+def median_iqr(seconds: list[float]) -> tuple[float, float]:
+    """(median, interquartile range q75 − q25) of timed calls; seconds must not be empty."""
+    q1, median, q3 = np.percentile(seconds, [25, 50, 75])
+    return float(median), float(q3 - q1)
+
+
 @dataclass
 class RenderTiming:
     """Seconds: cold (first render), warm median and interquartile range, every warm render in order."""
@@ -56,22 +70,16 @@ def time_renders(render: Callable[[], T], repeats: int, warmup: int,
     Once max_seconds of render time are spent, warm-up and repeats stop early (one timed warm
     render always runs), so a slow family costs seconds, not minutes; RenderTiming.repeats says how many ran.
     """
-    start = clock()
-    first = render()
-    cold = spent = clock() - start
+    first, cold = timed(render)
+    spent = cold
     for _ in range(warmup):
         if spent >= max_seconds:
             break
-        start = clock()
-        render()
-        spent += clock() - start
+        spent += timed(render)[1]
     warm: list[float] = []
     for _ in range(repeats):
-        start = clock()
-        render()
-        warm.append(clock() - start)
+        warm.append(timed(render)[1])
         spent += warm[-1]
         if spent >= max_seconds:
             break
-    q1, median, q3 = np.percentile(warm, [25, 50, 75])
-    return first, RenderTiming(float(cold), float(median), float(q3 - q1), [float(x) for x in warm])
+    return first, RenderTiming(cold, *median_iqr(warm), warm)

@@ -25,6 +25,7 @@ from typing import Any, Callable
 
 from ddfbench.metric_registry import by_name
 from ddfbench.report import matched, paired
+from ddfbench.report.records import chamfer_l2, ok_records, shape_name
 from ddfbench.report.stats import INTERVAL_NAME, Summary, summarize_values
 from ddfbench.runs import code_commits, find_records
 
@@ -53,12 +54,8 @@ class Claim:
     convention: str = ""
 
 
-def _ok(records: list[dict[str, Any]]) -> list[dict[str, Any]]:
-    return [r for r in records if r.get("status") == "ok"]
-
-
 def _n_points(records: list[dict[str, Any]]) -> str:
-    ns = sorted({(r.get("metrics") or {}).get("n_points") for r in _ok(records)} - {None})
+    ns = sorted({(r.get("metrics") or {}).get("n_points") for r in ok_records(records)} - {None})
     return "/".join(str(n) for n in ns) or "?"
 
 
@@ -84,20 +81,9 @@ def below(s: Summary, bound: float) -> str:
     return CONFIRMED if s.hi < bound else REFUTED if s.lo > bound else NOT_SEPARABLE
 
 
-def all_of(verdicts: list[str]) -> str:
-    """Several conditions that must all hold: refuted if any is, confirmed if all are."""
-    if REFUTED in verdicts:
-        return REFUTED
-    return CONFIRMED if verdicts and all(v == CONFIRMED for v in verdicts) else NOT_SEPARABLE
-
-
 def _missing(claim: str, source: str, paper: str, experiment: str) -> Claim:
     return Claim(claim, source, paper, "–", f"`{experiment}`", NO_RECORDS,
                  f"run `python -m ddfbench +experiment={experiment}` into the same results folder")
-
-
-def _chamfer(rec: dict[str, Any]) -> float:
-    return by_name()["chamfer_l2"].read(rec)
 
 
 # ---------------------------------------------------------------- DDF paper
@@ -106,7 +92,7 @@ def table2_ordering(records: Records) -> list[Claim]:
     """Table II: s_p matters most, s_fc less, s_dr least (CD at level 30 compared on the same seeds)."""
     src, recs = "DDF Table II, §VI-A", records.get("ablation") or []
     paper = "CD×10³ at 10/20/30: s_fc 0.714/0.829/0.694, s_dr 0.944/0.723/0.564, s_p 0.832/0.019/0.005"
-    if not _ok(recs):
+    if not ok_records(recs):
         return [_missing("s_p matters most", src, paper, "ablation")]
     at30 = {f: paired.values(recs, "chamfer_l2", lambda r, f=f: paired.surface_levels(r) == _level30(f),
                              paired.seed_key) for f in ("s_fc", "s_dr", "s_p")}
@@ -131,7 +117,7 @@ def fig6_ordering(records: Records) -> list[Claim]:
     """Fig. 6: surface sampling beats pov beats random at equal sample counts."""
     src, recs = "DDF Fig. 6, §VI-B", records.get("sampling") or []
     paper = "log-log CD against samples: ours (surface) lowest, then pov, then random"
-    if not _ok(recs):
+    if not ok_records(recs):
         return [_missing("surface < pov < random", src, paper, "sampling")]
     by = {s: paired.values(recs, "chamfer_l2", lambda r, s=s: paired.strategy(r) == s, paired.strategy_pair_key)
           for s in ("surface", "pov", "random")}
@@ -153,12 +139,12 @@ def table1_bunny(records: Records) -> list[Claim]:
     rows = [("representations", DDF), ("paper_ddf", "ddf_paper"), ("paper_ddf", "ddf_paper_lr")]
     out = []
     for experiment, model in rows:
-        recs = _ok(records.get(experiment) or [])
-        mine = [r for r in recs if r.get("model") == model and _shape(r) == "bunny"]
+        recs = ok_records(records.get(experiment) or [])
+        mine = [r for r in recs if r.get("model") == model and shape_name(r) == "bunny"]
         if not mine:
             out.append(_missing(f"{model}: bunny chamfer at most the paper's 0.589×10³", src, paper, experiment))
             continue
-        s = summarize_values(_chamfer(r) for r in mine)
+        s = summarize_values(chamfer_l2(r) for r in mine)
         empty = all((r.get("metrics") or {}).get("empty_reconstruction") for r in mine)
         steps = sorted({int((r.get("fit") or {}).get("steps") or 0) for r in mine})
         measured = (f"empty mesh in all {len(mine)} runs ({'/'.join(map(str, steps))} steps)" if empty
@@ -170,15 +156,11 @@ def table1_bunny(records: Records) -> list[Claim]:
     return out
 
 
-def _shape(rec: dict[str, Any]) -> str:
-    return str((rec.get("shape") or {}).get("name"))
-
-
 def accurate_as_sdf(records: Records) -> list[Claim]:
     """Conclusion: at similar training cost the DDF is as accurate as an SDF."""
     src, recs = "DDF §VII Conclusion", records.get("representations") or []
     paper = "with similar training cost (time and parameters) DDFs are as accurate as SDFs"
-    if not _ok(recs):
+    if not ok_records(recs):
         return [_missing("DDF as accurate as neural SDF", src, paper, "representations")]
     pick = lambda m, metric: paired.values(recs, metric, lambda r: r.get("model") == m, paired.seed_key)  # noqa: E731
     chamfer = paired.log_ratio(pick(DDF, "chamfer_l2"), pick(SDF, "chamfer_l2"))
@@ -206,12 +188,12 @@ def renders_faster(records: Records) -> list[Claim]:
     """Fig. 5 / conclusion: DDFs render faster than SDFs and triangle meshes."""
     src, recs = "DDF Fig. 5, §VII", records.get("render_time") or []
     paper = "DDF renders (depth, normals) faster than BVH meshes and SDFs, on an RTX 3090"
-    if not _ok(recs):
+    if not ok_records(recs):
         return [_missing("DDF renders faster than SDF and mesh", src, paper, "render_time")]
     key = lambda r: (*paired.seed_key(r), (r.get("scene") or {}).get("width"))  # noqa: E731
     pick = lambda m: paired.values(recs, "render_warm_s", lambda r: r.get("model") == m, key)  # noqa: E731
     ratios = {other: paired.log_ratio(pick(DDF), pick(other)) for other in (SDF, "mesh")}
-    gpu = any(str((r.get("env") or {}).get("device", "")).startswith("cuda") for r in _ok(recs))
+    gpu = any(str((r.get("env") or {}).get("device", "")).startswith("cuda") for r in ok_records(recs))
     # the claim is about rendering on a GPU; records say where they rendered
     out = []
     for other, r in ratios.items():
@@ -227,9 +209,9 @@ def renders_faster(records: Records) -> list[Claim]:
 def renders_faster_matched(records: Records, gpu: bool) -> list[Claim]:
     """The same claim with each family at its fastest setting as accurate in depth as the DDF."""
     src, paper = "DDF Fig. 5, §VII", "DDF renders faster than BVH meshes and SDFs, on an RTX 3090"
-    if not _ok(records.get("render_matched") or []):
+    if not ok_records(records.get("render_matched") or []):
         return [_missing("DDF faster at matched depth error", src, paper, "render_matched")]
-    table = matched.matched_table(_ok(records.get("render_time") or []) + _ok(records["render_matched"]))
+    table = matched.matched_table(ok_records(records.get("render_time") or []) + ok_records(records["render_matched"]))
     if table.empty:
         return [_missing("DDF faster at matched depth error", src, paper, "render_time")]
     largest = table[table["size"] == max(table["size"], key=lambda s: int(str(s).split("x")[0]))]
@@ -248,7 +230,7 @@ def renders_faster_matched(records: Records, gpu: bool) -> list[Claim]:
 def _storage(recs: list[dict[str, Any]], family: str, pick: Callable[[list[float]], float]) -> float:
     """pick() of the storage bytes of the family's runs (every preset of it: the GAN presets share G's network,
     the mesh family's LODs and levels are its sizes)."""
-    vals = [by_name()["storage_bytes"].read(r) for r in _ok(recs) if r.get("family") == family]
+    vals = [by_name()["storage_bytes"].read(r) for r in ok_records(recs) if r.get("family") == family]
     vals = [v for v in vals if math.isfinite(v)]
     return pick(vals) if vals else math.nan
 
@@ -257,7 +239,7 @@ def thesis_storage(records: Records) -> list[Claim]:
     """Table 4.4: G is 47 KB; G < mesh (2.28 MB) < grid SDF (33.9 MB)."""
     src, recs = "thesis Table 4.4, §4.5.3", records.get("storage") or records.get("representations") or []
     paper = "triangle mesh 2.28 MB, grid SDF 33.9 MB (165×164×130, text), generator G 47 KB"
-    if not _ok(recs):
+    if not ok_records(recs):
         return [_missing("G 47 KB; G < mesh < grid", src, paper, "storage")]
     g, mesh, grid = _storage(recs, "gan_sdf", max), _storage(recs, "mesh", max), _storage(recs, "grid_sdf", max)
     size_ok = math.isfinite(g) and abs(g - 47e3) <= STORAGE_TOLERANCE * 47e3

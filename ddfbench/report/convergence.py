@@ -14,18 +14,10 @@ from typing import Any, Iterable
 import numpy as np
 
 from ddfbench.metric_registry import by_name
+from ddfbench.report.records import Record, ok_records, shape_name
 
 FLOOR_MULTIPLES = (5.0, 2.0)  # time-to-reach k x the chamfer noise floor
 NOT_REACHED = "not reached"
-Record = dict[str, Any]
-
-
-def _ok(records: Iterable[Record]) -> list[Record]:
-    return [r for r in records if r.get("status") == "ok"]
-
-
-def _shape(rec: Record) -> str:
-    return str((rec.get("shape") or {}).get("name"))
 
 
 def curve(rec: Record, metric: str) -> tuple[np.ndarray, np.ndarray]:
@@ -39,10 +31,10 @@ def curve(rec: Record, metric: str) -> tuple[np.ndarray, np.ndarray]:
 def curves(records: Iterable[Record], metric: str) -> dict[tuple[str, str], list[tuple[np.ndarray, np.ndarray]]]:
     """{(model, shape): one curve per ok run with at least one probe}."""
     out: dict[tuple[str, str], list[tuple[np.ndarray, np.ndarray]]] = {}
-    for r in _ok(records):
+    for r in ok_records(records):
         c = curve(r, metric)
         if len(c[0]):
-            out.setdefault((str(r.get("model")), _shape(r)), []).append(c)
+            out.setdefault((str(r.get("model")), shape_name(r)), []).append(c)
     return out
 
 
@@ -64,10 +56,10 @@ def time_to_reach(t: np.ndarray, v: np.ndarray, threshold: float, better: str = 
     return float(t[np.argmax(hit)]) if hit.any() else math.inf
 
 
-def floor(records: Iterable[Record], shape: str, metric: str = "chamfer_l2") -> float:
-    """Mean noise floor of `metric` over the shape's records (NaN if none)."""
+def floor(records: Iterable[Record], shape: str | None = None, metric: str = "chamfer_l2") -> float:
+    """Mean noise floor of `metric` over the ok records of `shape` (of every shape where None; NaN if none)."""
     m = by_name()[metric]
-    vals = [m.read_floor(r) for r in _ok(records) if _shape(r) == shape]
+    vals = [m.read_floor(r) for r in ok_records(records) if shape is None or shape_name(r) == shape]
     vals = [v for v in vals if math.isfinite(v)]
     return float(np.mean(vals)) if vals else math.nan
 

@@ -15,6 +15,8 @@ from typing import Any
 
 import numpy as np
 
+from ddfbench.report.records import shape_name
+
 GALLERY = "gallery.png"
 OUTPUTS = ("normal", "depth")  # the render shown, first found
 _BACKGROUND = np.array([0.18, 0.18, 0.22])
@@ -67,7 +69,7 @@ def _cells(records: list[dict[str, Any]]) -> dict[tuple[str, str], dict[str, Any
     for rec in sorted(records, key=lambda r: int((r.get("config") or {}).get("seed", 0))):
         if _render_png(rec) is None:
             continue
-        cells.setdefault((str(rec.get("model")), str((rec.get("shape") or {}).get("name"))), rec)
+        cells.setdefault((str(rec.get("model")), shape_name(rec)), rec)
     return cells
 
 

@@ -14,20 +14,15 @@ from typing import Any, Callable, Iterable
 import numpy as np
 
 from ddfbench.metric_registry import by_name
+from ddfbench.report.records import Record, ok_records
 from ddfbench.report.stats import Summary, summarize_values
-
-Record = dict[str, Any]
-
-
-def _ok(records: Iterable[Record]) -> list[Record]:
-    return [r for r in records if r.get("status") == "ok"]
 
 
 def values(records: Iterable[Record], metric: str, select: Callable[[Record], bool],
            pair_key: Callable[[Record], tuple]) -> dict[tuple, float]:
     """{pair key: metric value} of the ok records `select` keeps (finite values only)."""
     read = by_name()[metric].read
-    out = {pair_key(r): read(r) for r in _ok(records) if select(r)}
+    out = {pair_key(r): read(r) for r in ok_records(records) if select(r)}
     return {k: v for k, v in out.items() if math.isfinite(v)}
 
 
@@ -49,7 +44,7 @@ def seed_key(rec: Record) -> tuple:
 def compare_settings(records: list[Record], metric: str, setting: Callable[[Record], str], baseline: str,
                      pair_key: Callable[[Record], tuple] = seed_key) -> list[dict[str, Any]]:
     """Each setting other than `baseline` against it: rows {setting, n, diff (Summary), ratio (Summary)}."""
-    names = list(dict.fromkeys(setting(r) for r in _ok(records)))
+    names = list(dict.fromkeys(setting(r) for r in ok_records(records)))
     base = values(records, metric, lambda r: setting(r) == baseline, pair_key)
     rows = []
     for name in names:

@@ -33,6 +33,7 @@ import numpy as np  # noqa: E402
 
 from ddfbench.metric_registry import by_name as registry_metrics  # noqa: E402
 from ddfbench.report import convergence  # noqa: E402
+from ddfbench.report.records import as_float, chamfer_l2, ok_records, shape_name  # noqa: E402
 from ddfbench.report.tables import override_labels  # noqa: E402
 
 PLOTS_BY_EXPERIMENT: dict[str, tuple[str, ...]] = {
@@ -70,36 +71,10 @@ def pareto_front(x: Iterable[float], y: Iterable[float]) -> np.ndarray:
     return np.array(front, dtype=int)
 
 
-def _ok(records: Iterable[dict[str, Any]]) -> list[dict[str, Any]]:
-    return [r for r in records if r.get("status") == "ok"]
-
-
-def _num(value: Any) -> float:
-    try:
-        return float(value)
-    except (TypeError, ValueError):
-        return math.nan
-
-
-def _chamfer(rec: dict[str, Any]) -> float:
-    return _num((rec.get("metrics") or {}).get("chamfer_l2"))
-
-
-def _floor(records: list[dict[str, Any]], shape: str | None = None) -> float:
-    vals = [_num(((r.get("metrics") or {}).get("noise_floor") or {}).get("chamfer_l2")) for r in records
-            if shape is None or _shape(r) == shape]
-    vals = [v for v in vals if math.isfinite(v)]
-    return float(np.mean(vals)) if vals else math.nan
-
-
-def _shape(rec: dict[str, Any]) -> str:
-    return str((rec.get("shape") or {}).get("name"))
-
-
 def _config_id(rec: dict[str, Any]) -> str:
     """The record's configuration, seeds pooled: its overrides minus seed=."""
     kept = [o for o in rec.get("overrides") or [] if not o.lstrip("+").startswith("seed=")]
-    return " ".join(sorted(kept)) + f" | {rec.get('model')} {_shape(rec)}"
+    return " ".join(sorted(kept)) + f" | {rec.get('model')} {shape_name(rec)}"
 
 
 def _labeller(records: list[dict[str, Any]]) -> Callable[[dict[str, Any]], str]:
@@ -149,14 +124,14 @@ def plot_fit_curves(records: list[dict[str, Any]], out_dir: str) -> list[str]:
     Colour: the model, or the run's sweep label where all runs share one model. Probes of an empty
     reconstruction (the penalty value) are drawn as crosses."""
     runs = []
-    for r in _ok(records):
-        pts = [(_num(p.get("seconds")), _num(p.get("chamfer_l2"))) for p in (r.get("fit") or {}).get("probes") or []]
+    for r in ok_records(records):
+        pts = [(as_float(p.get("seconds")), as_float(p.get("chamfer_l2"))) for p in (r.get("fit") or {}).get("probes") or []]
         pts = [(s, c) for s, c in pts if math.isfinite(s) and math.isfinite(c) and s > 0 and c > 0]
         if len(pts) >= 2:
             runs.append((r, pts))
     if not runs:
         return []
-    shapes = sorted({_shape(r) for r, _ in runs})
+    shapes = sorted({shape_name(r) for r, _ in runs})
     by_model = len({r.get("model") for r, _ in runs}) > 1
     name = (lambda r: str(r.get("model"))) if by_model else _labeller([r for r, _ in runs])
     colors = _colors(name(r) for r, _ in runs)
@@ -164,7 +139,7 @@ def plot_fit_curves(records: list[dict[str, Any]], out_dir: str) -> list[str]:
     for ax, shape in zip(axes[0], shapes):
         labelled = set()
         for r, pts in runs:
-            if _shape(r) != shape:
+            if shape_name(r) != shape:
                 continue
             s, c = np.array(pts).T
             key = name(r)
@@ -173,7 +148,7 @@ def plot_fit_curves(records: list[dict[str, Any]], out_dir: str) -> list[str]:
             ax.plot(s[~empty], c[~empty], "o", ms=3, color=colors[key])
             ax.plot(s[empty], c[empty], "x", ms=5, color=colors[key])
             labelled.add(key)
-        _floor_line(ax, _floor(records, shape))
+        _floor_line(ax, convergence.floor(records, shape))
         ax.set(xscale="log", yscale="log", xlabel="fit time (s)", ylabel="chamfer L2 (probe; × = empty mesh, penalty)",
                title=shape)
         ax.grid(True, which="both", alpha=0.3)
@@ -185,14 +160,14 @@ def _config_points(records: list[dict[str, Any]], cost: str) -> list[dict[str, A
     """Per configuration (seeds pooled): model, shape, mean cost x, mean chamfer y, empty (every run's
     reconstruction was empty: y is the penalty)."""
     groups: dict[str, list[dict[str, Any]]] = defaultdict(list)
-    for r in _ok(records):
+    for r in ok_records(records):
         groups[_config_id(r)].append(r)
     out = []
     for members in groups.values():
-        x, _ = _mean_std([_num((m.get("cost") or {}).get(cost)) for m in members])
-        y, _ = _mean_std([_chamfer(m) for m in members])
+        x, _ = _mean_std([as_float((m.get("cost") or {}).get(cost)) for m in members])
+        y, _ = _mean_std([chamfer_l2(m) for m in members])
         empty = all((m.get("metrics") or {}).get("empty_reconstruction") for m in members)
-        out.append({"model": str(members[0].get("model")), "shape": _shape(members[0]), "x": x, "y": y, "empty": empty})
+        out.append({"model": str(members[0].get("model")), "shape": shape_name(members[0]), "x": x, "y": y, "empty": empty})
     return out
 
 
@@ -202,8 +177,8 @@ def plot_pareto(records: list[dict[str, Any]], out_dir: str) -> list[str]:
                       if any(p["x"] > 0 and math.isfinite(p["y"]) for p in _config_points(records, c))]
     if not axes_with_data:
         return []
-    shapes = sorted({_shape(r) for r in _ok(records)})
-    colors = _colors(str(r.get("model")) for r in _ok(records))
+    shapes = sorted({shape_name(r) for r in ok_records(records)})
+    colors = _colors(str(r.get("model")) for r in ok_records(records))
     fig, axes = plt.subplots(len(shapes), len(axes_with_data), figsize=(5 * len(axes_with_data), 4 * len(shapes)),
                              squeeze=False)
     for row, shape in zip(axes, shapes):
@@ -218,7 +193,7 @@ def plot_pareto(records: list[dict[str, Any]], out_dir: str) -> list[str]:
             if len(front):
                 ax.plot([pts[i]["x"] for i in front], [pts[i]["y"] for i in front], "k-", lw=1, zorder=2,
                         label="Pareto front")
-            _floor_line(ax, _floor(records, shape))
+            _floor_line(ax, convergence.floor(records, shape))
             ax.set(xscale="log", yscale="log", xlabel=title, ylabel="chamfer L2 (× = empty mesh, penalty)", title=shape)
             ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
             ax.grid(True, which="both", alpha=0.3)
@@ -230,11 +205,11 @@ def sampling_lines(records: list[dict[str, Any]]) -> dict[tuple[str, str], list[
     """Per (model, strategy) of the ok runs that trained on samples (their record counts them; a family
     that needs none, such as mesh or grid_sdf, records no count): [(n labels, mean chamfer L2, std)] by n."""
     groups: dict[tuple[str, str, float], list[float]] = defaultdict(list)
-    for r in _ok(records):
+    for r in ok_records(records):
         s = r.get("sampling") or {}
-        n = _num(s.get("n_samples"))
+        n = as_float(s.get("n_samples"))
         if math.isfinite(n) and n > 0:
-            groups[(str(r.get("model")), str(s.get("strategy")), n)].append(_chamfer(r))
+            groups[(str(r.get("model")), str(s.get("strategy")), n)].append(chamfer_l2(r))
     lines: dict[tuple[str, str], list[tuple[float, float, float]]] = defaultdict(list)
     for (model, strategy, n), vals in groups.items():
         lines[(model, strategy)].append((n, *_mean_std(vals)))
@@ -251,7 +226,7 @@ def plot_sampling(records: list[dict[str, Any]], out_dir: str) -> list[str]:
     for (model, strategy), pts in lines.items():
         n, y, e = zip(*pts)
         ax.errorbar(n, y, yerr=e, marker="o", ms=4, capsize=2, label=f"{model} {strategy}" if several_models else strategy)
-    _floor_line(ax, _floor(_ok(records)))
+    _floor_line(ax, convergence.floor(records))
     ax.set(xscale="log", yscale="log", xlabel="training samples (labels)", ylabel="chamfer L2")
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=8)
@@ -261,12 +236,12 @@ def plot_sampling(records: list[dict[str, Any]], out_dir: str) -> list[str]:
 def plot_render_time(records: list[dict[str, Any]], out_dir: str) -> list[str]:
     """Cold and warm render time per model (groups) and image size (bars), log axis."""
     groups: dict[tuple[str, str], dict[str, list[float]]] = defaultdict(lambda: {"cold": [], "warm": []})
-    for r in _ok(records):
+    for r in ok_records(records):
         c, sc = r.get("cost") or {}, r.get("scene") or {}
         if "render_warm_s" in c:
             size = f"{sc.get('width')}×{sc.get('height')}"
-            groups[(str(r.get("model")), size)]["cold"].append(_num(c.get("render_cold_s")))
-            groups[(str(r.get("model")), size)]["warm"].append(_num(c.get("render_warm_s")))
+            groups[(str(r.get("model")), size)]["cold"].append(as_float(c.get("render_cold_s")))
+            groups[(str(r.get("model")), size)]["warm"].append(as_float(c.get("render_warm_s")))
     if not groups:
         return []
     models = sorted({m for m, _ in groups})
@@ -292,10 +267,10 @@ def ablation_lines(records: list[dict[str, Any]]) -> dict[str, list[tuple[int, f
     """Per factor of (s_fc, s_dr, s_p): [(level, mean chamfer L2, std)] over the ok surface runs whose
     other two factors sit at their base (lowest) level, by increasing level; {} without surface runs."""
     pts: dict[tuple[int, ...], list[float]] = defaultdict(list)
-    for r in _ok(records):
+    for r in ok_records(records):
         s = r.get("sampling") or {}
         if s.get("strategy") == "surface" and all(isinstance(s.get(f), (int, float)) for f in SURFACE_FACTORS):
-            pts[tuple(int(s[f]) for f in SURFACE_FACTORS)].append(_chamfer(r))
+            pts[tuple(int(s[f]) for f in SURFACE_FACTORS)].append(chamfer_l2(r))
     if not pts:
         return {}
     base = [min(p[i] for p in pts) for i in range(3)]
@@ -313,7 +288,7 @@ def plot_ablation(records: list[dict[str, Any]], out_dir: str) -> list[str]:
     for factor, line in lines.items():
         lv, y, e = zip(*line)
         ax.errorbar(lv, y, yerr=e, marker="o", capsize=2, label=f"{factor} (the others at their base level)")
-    _floor_line(ax, _floor(_ok(records)))
+    _floor_line(ax, convergence.floor(records))
     ax.set(yscale="log", xlabel="level (samples per point / face / direction)", ylabel="chamfer L2",
            title="surface sampling, one factor at a time")
     ax.grid(True, which="both", alpha=0.3)

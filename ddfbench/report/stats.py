@@ -1,4 +1,5 @@
-"""Statistics over seeds: mean, std, a Student t 95 % interval, interval overlap and paired differences.
+"""Statistics over seeds: mean, std, a Student t 95 % interval and interval overlap (paired
+differences: report.paired).
 
 The interval is the t interval of the mean over seeds, mean ± t(0.975, n−1)·s/√n; it needs n ≥ 2
 (NaN bounds otherwise). It assumes roughly normal seed-to-seed scatter; with n = 3 it is wide
@@ -64,8 +65,3 @@ def best_and_ties(means: Sequence[float], intervals: Sequence[tuple[float, float
         return {best: "best"}
     return {i: "tie" for i in [best, *tied]}
 
-
-def paired_difference(a: dict, b: dict, level: float = LEVEL) -> Summary:
-    """Summary of a[k] − b[k] over the keys (e.g. (shape, seed)) both dicts hold with finite values."""
-    keys = [k for k in a if k in b and math.isfinite(a[k]) and math.isfinite(b[k])]
-    return summarize_values([a[k] - b[k] for k in keys], level)

@@ -48,13 +48,6 @@ def _flatten(prefix: str, value: Any, out: dict[str, Any]) -> None:
         out[prefix] = json.dumps(value) if isinstance(value, list) else value
 
 
-def _num(value: Any) -> float:
-    try:
-        return float(value)
-    except (TypeError, ValueError):
-        return math.nan
-
-
 def override_labels(overrides: Iterable[str]) -> dict[str, str]:
     """{key: value} of a record's overrides, minus seeds and non-semantic keys (paths, threads, ...)."""
     out = {}
@@ -221,11 +214,6 @@ def marks(df: pd.DataFrame, metric: str) -> pd.Series:
         for i, mark in best_and_ties(means, intervals, better).items():
             out[part.index[i]] = mark
     return out
-
-
-def best_mask(df: pd.DataFrame, metric: str) -> pd.Series:
-    """True where a row's mean of `metric` is the best of its shape and separated from the rest."""
-    return marks(df, metric) == "best"
 
 
 def _fmt(mean: float, std: float, scale: float) -> str:
