@@ -39,6 +39,7 @@ import torch
 from tqdm import tqdm
 
 from ddfbench.checkpoint import restore, rng_state, set_rng_state, state_of
+from ddfbench.render.timing import clock
 from ddfbench.errors import InputError
 from ddfbench.representation import Budget, FitStats
 
@@ -149,11 +150,6 @@ def _first_nonfinite_param(module: torch.nn.Module) -> str | None:
     return None
 
 
-def _sync(device: str) -> None:
-    if device.startswith("cuda"):
-        torch.cuda.synchronize()
-
-
 def train_loop(
     module: torch.nn.Module,
     optimizer: torch.optim.Optimizer,
@@ -223,7 +219,7 @@ def train_loop(
         for g, lr in zip(optimizer.param_groups, base_lrs):
             g["lr"] = lr * factor
 
-        window_t0 = time.perf_counter() if window_t0 is None else window_t0
+        window_t0 = clock() if window_t0 is None else window_t0
         optimizer.zero_grad(set_to_none=True)
         loss = step_fn(step)
         pending.append(loss.detach())
@@ -241,8 +237,7 @@ def train_loop(
             break
         if step % host_every and step < budget.max_steps:
             continue
-        _sync(budget.device)
-        train_s += time.perf_counter() - window_t0
+        train_s += clock() - window_t0  # after the queued CUDA work of the window
         window_t0 = None
         values = torch.stack(pending).float().tolist()
         pending.clear()
