@@ -70,7 +70,7 @@ class SweepTableCallback(Callback):
 
     def on_multirun_end(self, config: DictConfig, **kwargs: Any) -> None:
         from ddfbench.report.tables import summarize, to_markdown
-        from ddfbench.runs import read_record
+        from ddfbench.runs import RECORD_FILE, read_record
 
         sweep_dir, out_dir = str(config.hydra.sweep.dir), str(config.get("out_dir", "results"))
         records = []
@@ -78,7 +78,7 @@ class SweepTableCallback(Callback):
             key_file = os.path.join(sweep_dir, job, KEY_FILE)
             if os.path.exists(key_file):
                 with open(key_file) as fh:
-                    rec = read_record(os.path.join(out_dir, fh.read().strip(), "record.json"))
+                    rec = read_record(os.path.join(out_dir, fh.read().strip(), RECORD_FILE))
                 if rec:
                     records.append(rec)
         if records and not config.get("quiet", False):

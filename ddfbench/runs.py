@@ -41,12 +41,17 @@ def config_key(cfg: Mapping[str, Any]) -> str:
     return hashlib.sha256(blob.encode()).hexdigest()[:16]
 
 
+RECORD_FILE = "record.json"  # in each run folder
+
+
 def run_dir(out_dir: str, experiment: str, key: str) -> str:
+    """The folder of one run: <out_dir>/<experiment>/<config key>."""
     return os.path.join(out_dir, experiment, key)
 
 
 def record_path(out_dir: str, experiment: str, key: str) -> str:
-    return os.path.join(run_dir(out_dir, experiment, key), "record.json")
+    """Where the run's record lives: <run_dir>/record.json."""
+    return os.path.join(run_dir(out_dir, experiment, key), RECORD_FILE)
 
 
 def _json_safe(value: Any) -> Any:
@@ -98,7 +103,7 @@ def find_records(root: str) -> list[dict[str, Any]]:
     """Every record.json below root (any depth), each with its own folder under "_dir"."""
     out = []
     for folder, _, files in os.walk(root):
-        if "record.json" in files and (rec := read_record(os.path.join(folder, "record.json"))):
+        if RECORD_FILE in files and (rec := read_record(os.path.join(folder, RECORD_FILE))):
             rec["_dir"] = folder
             out.append(rec)
     return sorted(out, key=lambda r: (r.get("experiment", ""), r.get("key", "")))

@@ -24,6 +24,8 @@ import os
 import re
 from typing import Any, Iterator, Mapping
 
+from ddfbench.runs import RECORD_FILE
+
 log = logging.getLogger(__name__)
 
 KEY_TAG = "ddfbench.key"
@@ -134,7 +136,7 @@ def _experiment_id(client: Any, uri: str, name: str) -> str:
 
 
 def _artifacts(client: Any, run_id: str, run_dir: str, record: Mapping[str, Any]) -> None:
-    client.log_artifact(run_id, os.path.join(run_dir, "record.json"))
+    client.log_artifact(run_id, os.path.join(run_dir, RECORD_FILE))
     arts = record.get("artifacts") or {}
     renders = os.path.join(run_dir, str(arts.get("renders") or "renders"))
     if arts.get("renders") and os.path.isdir(renders):
