@@ -85,6 +85,9 @@ class GridSDF(SDFFamily):
         return v.reshape(-1) + outside
 
     def surface_normals(self, points: torch.Tensor):
+        """Central differences of the trilinear field at surface points (M,3), one grid step (2 domain /
+        (resolution - 1), normalized units) to each side per axis -> (outward unit normals (M,3), valid (M,)
+        bool: False where the difference vanishes or is not finite, field_evals = 6 M, backward_passes = 0)."""
         step = 2.0 * self.domain / (self.resolution - 1)
         nrm, valid = central_difference_normals(self.field, points, step)
         return nrm, valid, 6 * int(points.shape[0]), 0
