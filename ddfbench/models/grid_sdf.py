@@ -105,7 +105,7 @@ class GridSDF(SDFFamily):
         return self._publish(tmp, path)
 
     @classmethod
-    def load(cls, path: str, domain: float = BOX_HALF) -> "GridSDF":
+    def load(cls, path: str, domain: float | None = None) -> "GridSDF":
         try:
             with np.load(path, allow_pickle=False) as z:
                 header, grid = json.loads(str(z["header"])), z["sdf"]
@@ -115,7 +115,7 @@ class GridSDF(SDFFamily):
         if grid.shape != (n, n, n) or str(grid.dtype) != header["dtype"]:
             raise InputError(f"grid_sdf artifact {path}: grid {grid.shape} {grid.dtype} does not match its header")
         cfg = {k: header[k] for k in ("resolution", "dtype", "build", "trace")}
-        rep = cls(cfg, float(header["domain"]))
+        rep = cls(cfg, cls._artifact_domain(path, header, domain))
         rep._set_grid(grid)
         rep._saved_path = path
         return rep

@@ -200,9 +200,9 @@ class DDF(Representation):
         return self._save_network(path, {k: v.detach().to("cpu", dtype) for k, v in self.net.state_dict().items()})
 
     @classmethod
-    def load(cls, path: str, domain: float = BOX_HALF) -> "DDF":
+    def load(cls, path: str, domain: float | None = None) -> "DDF":
         header, state = cls._read_network(path)
-        rep = cls(header["cfg"], float(header.get("domain", domain)))
+        rep = cls(header["cfg"], cls._artifact_domain(path, header, domain))
         rep.net.load_state_dict({k: v.float() for k, v in state.items()})
         rep.net.eval()
         rep._saved_path = path
