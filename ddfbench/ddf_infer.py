@@ -14,18 +14,13 @@ from typing import Callable
 
 import torch
 
-from ddfbench.geometry import ray_box
+from ddfbench.geometry import box_entry
 from ddfbench.models.ddf import DDF
 
 PRECISIONS = {"fp32": None, "bf16": torch.bfloat16, "fp16": torch.float16}
 
 
-def box_entry_torch(o: torch.Tensor, d: torch.Tensor, half: float) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-    """ddfbench.models.ddf.box_entry on tensors (geometry.ray_box from t = 0 on): t_entry (N,) (0 inside),
-    t_exit (N,), meets (N,) bool."""
-    lo, hi = ray_box(o, d, half)
-    t_entry = lo.clamp_min(0.0)
-    return t_entry, hi, hi >= t_entry
+box_entry_torch = box_entry  # the name ddfbench/bench/race.py imports; geometry.box_entry takes tensors too
 
 
 class DDFDepth:
@@ -48,7 +43,7 @@ class DDFDepth:
             self._step = torch.compile(self._chunk_depth, dynamic=True)
 
     def _chunk_depth(self, o: torch.Tensor, d: torch.Tensor) -> torch.Tensor:
-        t_entry, t_exit, meets = box_entry_torch(o, d, self.rep.domain)
+        t_entry, t_exit, meets = box_entry(o, d, self.rep.domain)
         dtype = PRECISIONS[self.precision]
         with torch.autocast(self.device.type, dtype=dtype or torch.float32, enabled=dtype is not None):
             dist, logit = self.rep.net(o + t_entry[:, None] * d, d)

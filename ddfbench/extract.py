@@ -72,6 +72,8 @@ def evaluate(fn: Field, points: np.ndarray, batch: int = 65536) -> np.ndarray:
 
 
 def empty_mesh() -> trimesh.Trimesh:
+    """A mesh with no vertices (0, 3) float64 and no faces (0, 3) int64: what an extraction that finds no
+    surface returns (geometry_metrics scores it with the empty-reconstruction penalties)."""
     return trimesh.Trimesh(np.zeros((0, 3)), np.zeros((0, 3), np.int64), process=False)
 
 

@@ -19,19 +19,31 @@ def ray_box(origins, directions, half: float = BOX_HALF):
     """Slab test: ray parameters (enter, leave), each (N,), where rays origins (N,3) + t directions (N,3)
     are inside the closed box [-half, half]^3; the ray misses the box where enter > leave.
 
-    numpy arrays or torch tensors in, the same kind out; both t may be negative (box behind the origin),
-    and nothing is clamped to t >= 0. The box is closed: a ray with a zero direction component lies in
-    that slab for every t when its origin is inside or on the slab's faces and for no t otherwise, so
+    numpy arrays or torch tensors in, the same kind and dtype out; both t may be negative (box behind the
+    origin), and nothing is clamped to t >= 0. The box is closed: a ray with a zero direction component lies
+    in that slab for every t when its origin is inside or on the slab's faces and for no t otherwise, so
     a ray lying in a face of the box meets it along the face (an interval, never NaN).
     """
     xp = torch if isinstance(origins, torch.Tensor) else np
     flat = directions == 0
     inv = 1.0 / xp.where(flat, 1.0, directions)
     t0, t1 = (-half - origins) * inv, (half - origins) * inv
-    in_slab = xp.abs(origins) <= half
-    enter = xp.where(flat, xp.where(in_slab, -math.inf, math.inf), xp.minimum(t0, t1))
-    leave = xp.where(flat, xp.where(in_slab, math.inf, -math.inf), xp.maximum(t0, t1))
+    always = flat & (xp.abs(origins) <= half)  # every t lies in this slab; flat & ~always: no t does
+    enter = xp.where(always, -math.inf, xp.where(flat, math.inf, xp.minimum(t0, t1)))
+    leave = xp.where(always, math.inf, xp.where(flat, -math.inf, xp.maximum(t0, t1)))
     return xp.amax(enter, 1), xp.amin(leave, 1)
+
+
+def box_entry(origins, directions, half: float = BOX_HALF):
+    """ray_box from t = 0 on, for rays origins (N,3) + t directions (N,3) against [-half, half]^3.
+
+    Returns t_entry (N,) = max(enter, 0) (0 for an origin inside the box), t_exit (N,) = leave, and
+    meets (N,) bool = t_exit >= t_entry (False where the ray misses the box or has it behind its origin).
+    numpy arrays or torch tensors in, the same kind and dtype out.
+    """
+    enter, leave = ray_box(origins, directions, half)
+    t_entry = enter.clip(min=0.0)
+    return t_entry, leave, leave >= t_entry
 
 
 def camera_basis(position, look_at, up) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

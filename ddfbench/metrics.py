@@ -1,6 +1,6 @@
 """Point-cloud and surface metrics (DESIGN.md conventions), KD-tree based.
 
-Conventions: chamfer L2 is squared and summed (Kaolin): w1·mean_a min_b‖a−b‖² + w2·mean_b min_a‖a−b‖².
+Conventions: chamfer L2 is squared and summed (Kaolin): mean_a min_b‖a−b‖² + mean_b min_a‖a−b‖².
 Chamfer L1 (Occupancy Networks) is ½(mean dist a→b + mean dist b→a), unsquared.
 Sided distance is the squared distance of each point of a to the nearest point of b.
 F-score at radius r uses unsquared distances. Units: the normalized frame (unit cube).
@@ -14,7 +14,7 @@ import numpy as np
 import trimesh
 from scipy.spatial import cKDTree
 
-from ddfbench.metric_registry import PENALTY_DISTANCE, fscore, penalties
+from ddfbench.metric_registry import fscore, penalties
 
 
 def kd_tree(points: np.ndarray) -> cKDTree:
@@ -32,24 +32,10 @@ def nearest_distance(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarr
     return nearest_in(kd_tree(b), a)
 
 
-def _empty(*clouds: np.ndarray) -> bool:
-    return any(len(c) == 0 for c in clouds)
-
-
-def sided_distance(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Squared distance (N,) from each point of a (N,3) to the nearest point of b (M,3) (paper Eq. 15).
-
-    An empty b puts every point of a at the penalty distance.
-    """
-    if len(b) == 0:
-        return np.full(len(a), PENALTY_DISTANCE**2)
-    return nearest_distance(a, b)[0] ** 2
-
-
-def chamfer_l2_of(d_ab: np.ndarray, d_ba: np.ndarray, w1: float = 1.0, w2: float = 1.0) -> float:
-    """Chamfer L2 (paper Eq. 14) from unsquared nearest distances a→b (N,) and b→a (M,):
-    w1·mean d_ab² + w2·mean d_ba²."""
-    return float(w1 * (d_ab**2).mean() + w2 * (d_ba**2).mean())
+def chamfer_l2_of(d_ab: np.ndarray, d_ba: np.ndarray) -> float:
+    """Chamfer L2 (paper Eq. 14, unit weights) from unsquared nearest distances a→b (N,) and b→a (M,):
+    mean d_ab² + mean d_ba²."""
+    return float((d_ab**2).mean() + (d_ba**2).mean())
 
 
 def chamfer_l1_of(d_ab: np.ndarray, d_ba: np.ndarray) -> float:
@@ -62,27 +48,6 @@ def f_score_of(d_pred_gt: np.ndarray, d_gt_pred: np.ndarray, radius: float) -> f
     (recall R); 0 where P+R = 0."""
     p, r = float((d_pred_gt <= radius).mean()), float((d_gt_pred <= radius).mean())
     return 0.0 if p + r == 0 else 2 * p * r / (p + r)
-
-
-def chamfer_distance(a: np.ndarray, b: np.ndarray, w1: float = 1.0, w2: float = 1.0) -> float:
-    """Chamfer L2 between clouds a (N,3) and b (M,3); (w1+w2)·D² if a cloud is empty."""
-    if _empty(a, b):
-        return float((w1 + w2) * PENALTY_DISTANCE**2)
-    return chamfer_l2_of(nearest_distance(a, b)[0], nearest_distance(b, a)[0], w1, w2)
-
-
-def chamfer_l1(a: np.ndarray, b: np.ndarray) -> float:
-    """Chamfer L1 between clouds a (N,3) and b (M,3), unsquared; D if a cloud is empty."""
-    if _empty(a, b):
-        return PENALTY_DISTANCE
-    return chamfer_l1_of(nearest_distance(a, b)[0], nearest_distance(b, a)[0])
-
-
-def f_score(gt: np.ndarray, pred: np.ndarray, radius: float) -> float:
-    """F-score of clouds pred (M,3) against gt (N,3) at an unsquared radius; 0 if a cloud is empty."""
-    if _empty(gt, pred):
-        return 0.0
-    return f_score_of(nearest_distance(pred, gt)[0], nearest_distance(gt, pred)[0], radius)
 
 
 def summary(values: np.ndarray) -> dict[str, float]:
@@ -107,13 +72,10 @@ def sample_surface(mesh: trimesh.Trimesh, n: int, seed: int) -> tuple[np.ndarray
     return points, normals
 
 
-def normal_consistency(a: np.ndarray, na: np.ndarray, b: np.ndarray, nb: np.ndarray) -> float:
-    """Mean |cos| between each point's normal and its nearest neighbour's normal in the other set, both ways."""
-    return matched_normal_consistency(na, nb, nearest_distance(a, b)[1], nearest_distance(b, a)[1])
-
-
 def matched_normal_consistency(na: np.ndarray, nb: np.ndarray, a_to_b: np.ndarray, b_to_a: np.ndarray) -> float:
-    """normal_consistency from the nearest-neighbour indices already found: a_to_b (N,) into b, b_to_a (M,) into a."""
+    """Normal consistency in [0, 1]: ½(mean |na·nb[a_to_b]| + mean |nb·na[b_to_a]|), the unsigned cosine between
+    each point's unit normal and that of its nearest neighbour in the other cloud. na (N,3), nb (M,3) unit
+    normals; a_to_b (N,) indices into b, b_to_a (M,) indices into a (nearest neighbours already found)."""
     ab = np.abs(np.einsum("ij,ij->i", na, nb[a_to_b]))
     ba = np.abs(np.einsum("ij,ij->i", nb, na[b_to_a]))
     return float(0.5 * (ab.mean() + ba.mean()))
@@ -128,8 +90,9 @@ def point_to_surface(points: np.ndarray, mesh: trimesh.Trimesh) -> np.ndarray:
 
 
 def cloud_metrics(gt: np.ndarray, rec: np.ndarray, radii: Sequence[float]) -> dict[str, Any]:
-    """Chamfer L2/L1, f-score per radius and sided distances between two point clouds (penalty if one is empty)."""
-    if _empty(gt, rec):
+    """Chamfer L2/L1, f-score per radius and sided distances between point clouds gt (N,3) and rec (M,3)
+    (penalty_metrics if one is empty)."""
+    if len(gt) == 0 or len(rec) == 0:
         return penalty_metrics(radii)
     return distance_metrics(nearest_distance(gt, rec)[0], nearest_distance(rec, gt)[0], radii)
 

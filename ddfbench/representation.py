@@ -144,8 +144,22 @@ class Representation(abc.ABC):
 
     @classmethod
     @abc.abstractmethod
-    def load(cls, path: str, domain: float = BOX_HALF) -> "Representation":
-        """Read an artifact written by save (models: torch.load(weights_only=True))."""
+    def load(cls, path: str, domain: float | None = None) -> "Representation":
+        """Read an artifact written by save (models: torch.load(weights_only=True)). domain: the field half-side
+        the caller expects, None for whatever the artifact holds. An artifact stores its own domain and loading
+        it for another is a one-line InputError (_artifact_domain); only the mesh's .ply stores none and takes
+        the caller's."""
+
+    @classmethod
+    def _artifact_domain(cls, path: str, header: Mapping[str, Any], expected: float | None) -> float:
+        """The field half-side an artifact's header stores; a one-line InputError when it stores none or the
+        caller expects another (expected None: any)."""
+        if not isinstance(header.get("domain"), (int, float)):
+            raise InputError(f"{cls.family} artifact {path}: its header stores no domain")
+        stored = float(header["domain"])
+        if expected is not None and float(expected) != stored:
+            raise InputError(f"{cls.family} artifact {path}: saved with domain {stored}, loaded with domain {expected}")
+        return stored
 
     def _publish(self, tmp: str, path: str) -> str:
         """Finish a save: rename the fully written temporary file onto path and remember it."""

@@ -53,6 +53,9 @@ class Samples:
 
     @staticmethod
     def load_npz(path: str) -> "Samples":
+        """Samples from an .npz written by save_npz (allow_pickle=False): arrays x (N,3) and, where saved, d (N,3),
+        t (N,), hit (N,), line_hit (N,), sdf (N,), in their saved dtypes; arrays absent from the file are None,
+        meta {} when the file has none."""
         with np.load(path, allow_pickle=False) as z:
             get = lambda k: z[k] if k in z.files else None  # noqa: E731
             meta = json.loads(str(z["meta"])) if "meta" in z.files else {}

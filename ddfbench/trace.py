@@ -48,7 +48,7 @@ import numpy as np
 import torch
 
 from ddfbench.errors import InputError
-from ddfbench.geometry import ray_box
+from ddfbench.geometry import box_entry
 from ddfbench.representation import Hits, RayStatus
 
 TorchField = Callable[[torch.Tensor], torch.Tensor]
@@ -114,11 +114,9 @@ class TraceResult:
 
 
 def clip_to_box(origins: torch.Tensor, directions: torch.Tensor, half: float) -> tuple[torch.Tensor, torch.Tensor]:
-    """geometry.ray_box against [-half, half]^3 from t = 0 on: (t_enter, t_exit) (N,), t_enter >= 0;
-    t_enter > t_exit on a miss."""
-    with torch.no_grad():
-        enter, leave = ray_box(origins, directions, half)
-        return enter.clamp_min(0.0), leave
+    """geometry.box_entry without `meets` (ddfbench/bench/tracing.py's baseline loop): (t_enter, t_exit) (N,),
+    t_enter >= 0; t_enter > t_exit on a miss."""
+    return box_entry(origins, directions, half)[:2]
 
 
 def sphere_trace(field: TorchField, origins: np.ndarray, directions: np.ndarray, domain: float,
@@ -134,7 +132,7 @@ def sphere_trace(field: TorchField, origins: np.ndarray, directions: np.ndarray,
     status = torch.full((n,), int(RayStatus.MISS), dtype=torch.int8, device=dev)
     evals, syncs = 0, 1
     with torch.no_grad():
-        t_enter, t_exit = clip_to_box(o, d, domain)
+        t_enter, t_exit, _ = box_entry(o, d, domain)
         t_far_all = t_exit.clamp_max(opt.t_max)
         # per active ray: index, t, previous point (t_prev, r_prev), side sign, omega, escape phase.
         # Rows are written back with where-scatters through idx (no sync) and compacted with one

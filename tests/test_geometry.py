@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 import torch
 
-from ddfbench.geometry import BOX_HALF, FourierFeatures, pinhole_rays, ray_box
+from ddfbench.geometry import BOX_HALF, FourierFeatures, box_entry, pinhole_rays, ray_box
 from ddfbench.sampling.directions import uniform_directions
 
 
@@ -23,6 +23,25 @@ def test_ray_box_matches_a_brute_force_march():
             assert abs(s[inside[i]].min() - t_in[i]) < 2e-3 and abs(s[inside[i]].max() - t_out[i]) < 2e-3
         else:
             assert t_in[i] > t_out[i]
+
+
+@pytest.mark.parametrize("kind", ["numpy", "torch"])
+def test_box_entry_from_t_zero_matches_a_brute_force_march(kind):
+    """t_entry is the first t >= 0 inside the box (0 from inside), meets whether any is; float32 stays float32."""
+    rng = np.random.default_rng(0)
+    o = rng.uniform(-2, 2, (500, 3)).astype(np.float32)
+    d = uniform_directions(rng, 500).astype(np.float32)
+    d[:5] = [1, 0, 0]  # axis-parallel rays hit the slab-parallel case
+    args = (o, d) if kind == "numpy" else (torch.from_numpy(o), torch.from_numpy(d))
+    t_in, t_out, meets = (np.asarray(v) for v in box_entry(*args, 0.6))
+    assert t_in.dtype == t_out.dtype == np.float32 and meets.dtype == bool
+    ts = np.linspace(0, 5, 5001)
+    inside = np.all(np.abs(o[:, None, :] + ts[None, :, None] * d[:, None, :]) <= 0.6, axis=2)
+    clear = ~meets | (t_out - t_in > 2e-3)  # chords shorter than the marching step may slip through
+    assert np.array_equal(meets[clear], inside.any(1)[clear])
+    assert inside[:, 0].any() and (t_in[inside[:, 0]] == 0).all()  # origins inside the box enter at 0
+    first = np.where(inside.any(1), ts[inside.argmax(1)], np.nan)
+    assert np.allclose(t_in[inside.any(1)], first[inside.any(1)], atol=2e-3)
 
 
 # rays with zero direction components: in a face, on an edge, inside, parallel outside a face

@@ -4,35 +4,51 @@ import numpy as np
 import trimesh
 
 from ddfbench import metrics
+from ddfbench.metric_registry import PENALTY_DISTANCE
+
+
+def pairwise_sq(a, b):
+    """Squared distances (N, M) between every point of a (N,3) and of b (M,3)."""
+    return ((a[:, None, :] - b[None, :, :]) ** 2).sum(-1)
 
 
 def brute_sq(a, b):
-    return ((a[:, None, :] - b[None, :, :]) ** 2).sum(-1).min(axis=1)
+    """Squared distance (N,) from each point of a to its nearest point of b, over all pairs."""
+    return pairwise_sq(a, b).min(axis=1)
 
 
-def test_sided_and_chamfer_match_brute_force(rng):
-    a, b = rng.normal(size=(300, 3)), rng.normal(size=(200, 3)) + 0.1
-    assert np.allclose(metrics.sided_distance(a, b), brute_sq(a, b))
-    expect = 0.5 * brute_sq(a, b).mean() + 2.0 * brute_sq(b, a).mean()
-    assert np.isclose(metrics.chamfer_distance(a, b, w1=0.5, w2=2.0), expect)
-    expect_l1 = 0.5 * (np.sqrt(brute_sq(a, b)).mean() + np.sqrt(brute_sq(b, a)).mean())
-    assert np.isclose(metrics.chamfer_l1(a, b), expect_l1)
+def brute_fscore(gt, rec, r):
+    """F-score at radius r over all pairs: precision = share of rec within r of gt, recall the reverse."""
+    p, rc = (np.sqrt(brute_sq(rec, gt)) <= r).mean(), (np.sqrt(brute_sq(gt, rec)) <= r).mean()
+    return 0.0 if p + rc == 0 else 2 * p * rc / (p + rc)
+
+
+def test_cloud_metrics_match_brute_force(rng):
+    gt, rec = rng.normal(size=(300, 3)), rng.normal(size=(200, 3)) + 0.1
+    m = metrics.cloud_metrics(gt, rec, [0.1])
+    assert np.isclose(m["chamfer_l2"], brute_sq(gt, rec).mean() + brute_sq(rec, gt).mean())
+    assert np.isclose(m["chamfer_l1"], 0.5 * (np.sqrt(brute_sq(gt, rec)).mean() + np.sqrt(brute_sq(rec, gt)).mean()))
+    to_rec = brute_sq(gt, rec)
+    assert np.isclose(m["sided_gt_to_rec"]["mean"], to_rec.mean())
+    assert np.isclose(m["sided_gt_to_rec"]["median"], np.median(to_rec))
+    assert np.isclose(m["sided_gt_to_rec"]["p95"], np.percentile(to_rec, 95))
+    assert np.isclose(m["sided_rec_to_gt"]["mean"], brute_sq(rec, gt).mean())
 
 
 def test_fscore_matches_brute_force(rng):
     gt, pred = rng.uniform(size=(250, 3)), rng.uniform(size=(180, 3))
     r = 0.08
-    p = (np.sqrt(brute_sq(pred, gt)) <= r).mean()
-    rc = (np.sqrt(brute_sq(gt, pred)) <= r).mean()
-    assert np.isclose(metrics.f_score(gt, pred, r), 2 * p * rc / (p + rc))
-    assert metrics.f_score(gt, gt + 10.0, r) == 0.0
-    assert metrics.f_score(gt, gt, r) == 1.0
+    fscore = lambda a, b: metrics.cloud_metrics(a, b, [r])["fscore"][str(r)]  # noqa: E731
+    assert 0 < brute_fscore(gt, pred, r) < 1 and np.isclose(fscore(gt, pred), brute_fscore(gt, pred, r))
+    assert fscore(gt, gt + 10.0) == 0.0
+    assert fscore(gt, gt) == 1.0
 
 
 def test_chamfer_is_symmetric_and_zero_on_identity(rng):
     a, b = rng.normal(size=(100, 3)), rng.normal(size=(120, 3))
-    assert np.isclose(metrics.chamfer_distance(a, b), metrics.chamfer_distance(b, a))
-    assert metrics.chamfer_distance(a, a) == 0.0
+    ab, ba, aa = (metrics.cloud_metrics(x, y, []) for x, y in ((a, b), (b, a), (a, a)))
+    assert np.isclose(ab["chamfer_l2"], ba["chamfer_l2"]) and np.isclose(ab["chamfer_l1"], ba["chamfer_l1"])
+    assert aa["chamfer_l2"] == 0.0 and aa["chamfer_l1"] == 0.0
 
 
 def test_sample_surface_lies_on_mesh_and_is_seeded():
@@ -69,19 +85,24 @@ def test_empty_reconstruction_gets_penalty_not_exception():
     m = metrics.geometry_metrics(sphere, empty, 1000, [0.01], seed=0)
     assert m["empty_reconstruction"] is True
     assert m["fscore"]["0.01"] == 0.0
-    assert np.isfinite(m["chamfer_l2"]) and m["chamfer_l2"] >= metrics.PENALTY_DISTANCE**2
+    assert np.isfinite(m["chamfer_l2"]) and m["chamfer_l2"] >= PENALTY_DISTANCE**2
 
 
-def test_geometry_metrics_equal_the_metrics_on_its_own_samples():
-    """geometry_metrics shares KD-trees between metrics; each value must equal the standalone metric."""
+def test_geometry_metrics_equal_brute_force_on_its_own_samples():
+    """geometry_metrics shares KD-trees between metrics; each value must equal an all-pairs computation
+    on the same seeded samples (GT seed, rec seed + 1, floor seed + 2)."""
     gt, rec = trimesh.creation.icosphere(3, 0.5), trimesh.creation.box(extents=(0.8, 0.9, 1.0))
-    m = metrics.geometry_metrics(gt, rec, 3000, [0.01, 0.05], seed=4, with_point_to_surface=False)
-    g, gn = metrics.sample_surface(gt, 3000, 4)
-    r, rn = metrics.sample_surface(rec, 3000, 5)
-    floor = metrics.sample_surface(gt, 3000, 6)[0]
-    assert np.isclose(m["chamfer_l2"], brute_sq(g, r).mean() + brute_sq(r, g).mean())
-    assert np.isclose(m["chamfer_l1"], metrics.chamfer_l1(g, r))
-    assert all(np.isclose(m["fscore"][str(t)], metrics.f_score(g, r, t)) for t in (0.01, 0.05))
-    assert np.isclose(m["sided_rec_to_gt"]["mean"], brute_sq(r, g).mean())
-    assert np.isclose(m["normal_consistency"], metrics.normal_consistency(g, gn, r, rn))
+    m = metrics.geometry_metrics(gt, rec, 1000, [0.01, 0.05], seed=4, with_point_to_surface=False)
+    g, gn = metrics.sample_surface(gt, 1000, 4)
+    r, rn = metrics.sample_surface(rec, 1000, 5)
+    floor = metrics.sample_surface(gt, 1000, 6)[0]
+    sq = pairwise_sq(g, r)
+    d_gr, d_rg = np.sqrt(sq.min(1)), np.sqrt(sq.min(0))
+    assert np.isclose(m["chamfer_l2"], (d_gr**2).mean() + (d_rg**2).mean())
+    assert np.isclose(m["chamfer_l1"], 0.5 * (d_gr.mean() + d_rg.mean()))
+    assert all(np.isclose(m["fscore"][str(t)], brute_fscore(g, r, t)) for t in (0.01, 0.05))
+    assert np.isclose(m["sided_rec_to_gt"]["mean"], (d_rg**2).mean())
+    cos_gr = np.abs((gn * rn[sq.argmin(1)]).sum(1))
+    cos_rg = np.abs((rn * gn[sq.argmin(0)]).sum(1))
+    assert 0.5 < m["normal_consistency"] < 1 and np.isclose(m["normal_consistency"], 0.5 * (cos_gr.mean() + cos_rg.mean()))
     assert np.isclose(m["noise_floor"]["chamfer_l2"], brute_sq(g, floor).mean() + brute_sq(floor, g).mean())

@@ -101,10 +101,11 @@ class NetSDFFamily(SDFFamily):
         return self._save_network(path, {k: v.detach().cpu() for k, v in self.net.state_dict().items()})
 
     @classmethod
-    def load(cls, path: str, domain: float = BOX_HALF) -> "NetSDFFamily":
+    def load(cls, path: str, domain: float | None = None) -> "NetSDFFamily":
         header, state = cls._read_network(path)
+        stored_domain = cls._artifact_domain(path, header, domain)
         try:
-            rep = cls(header["cfg"], float(header["domain"]))
+            rep = cls(header["cfg"], stored_domain)
             rep.net.load_state_dict(state)
         except (RuntimeError, KeyError, ValueError, TypeError) as exc:
             raise InputError(f"{cls.family} artifact {path}: unreadable ({str(exc).splitlines()[0]})") from None

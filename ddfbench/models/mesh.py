@@ -112,8 +112,9 @@ class MeshFamily(Representation):
         return path
 
     @classmethod
-    def load(cls, path: str, domain: float = BOX_HALF) -> "MeshFamily":
-        rep = cls({"faces": 0}, domain)
+    def load(cls, path: str, domain: float | None = None) -> "MeshFamily":
+        """The .ply written by save; a .ply stores no domain, so the caller's is used (BOX_HALF when None)."""
+        rep = cls({"faces": 0}, BOX_HALF if domain is None else domain)
         rep._set_mesh(trimesh.load(path, force="mesh", process=False))
         rep._saved_path = path
         return rep

@@ -7,7 +7,7 @@ Promise:
   nine votes agree with it on at least 95 % of points; on bunny10k it agrees with the watertight
   bunny on 99 % of points 0.02 away from the surface; signed distances stay finite;
 - every sampling strategy works on them (finite samples);
-- a whole run with the mesh family is ok; families whose training signs come from the inside test
+- a whole run with the mesh family is ok and at the noise floor; families whose training signs come from the inside test
   (ddf, neural_sdf, grid_sdf, gan_sdf) add a flag naming the non-watertight input to the record.
 """
 
@@ -92,9 +92,14 @@ def test_sampling_works(open_shape, strategy, kind, tmp_path):
 
 
 def test_mesh_family_run_is_ok(tmp_path):
+    """The mesh family at full resolution keeps the GT mesh itself, so its sampled chamfer sits at the noise
+    floor (two independent samplings of one surface; 1.00 of it measured) and the exact point-to-surface
+    distance is round-off (2e-8 measured): a frame, scale or extraction error on the open mesh breaks both."""
     rec = run(compose("shape=open_box", "model=mesh", out_dir=tmp_path))
     assert rec["status"] == "ok" and rec["shape"]["watertight"] is False
-    assert np.isfinite(rec["metrics"]["chamfer_l2"])
+    m = rec["metrics"]
+    assert 0.5 < m["chamfer_l2"] / m["noise_floor"]["chamfer_l2"] < 1.5
+    assert m["p2s_chamfer_l1"] < 1e-5
 
 
 @pytest.mark.parametrize("family", SIGN_FROM_INSIDE_TEST)

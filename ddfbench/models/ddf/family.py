@@ -8,11 +8,11 @@ import numpy as np
 import torch
 import trimesh
 
-from ddfbench.geometry import BOX_HALF
+from ddfbench.geometry import BOX_HALF, box_entry
 from ddfbench.models.ddf import fit as ddf_fit
 from ddfbench.models.ddf import mesh as ddf_mesh
 from ddfbench.models.ddf.network import DDFNet, checked_config
-from ddfbench.models.ddf.rays import box_entry, unit_normals
+from ddfbench.models.ddf.rays import unit_normals
 from ddfbench.representation import Budget, FitData, FitStats, Hits, Probe, RayStatus, Representation
 
 # Normals in intersect: a chunk whose hit share reaches this runs one backward over all its rays rather
@@ -200,9 +200,9 @@ class DDF(Representation):
         return self._save_network(path, {k: v.detach().to("cpu", dtype) for k, v in self.net.state_dict().items()})
 
     @classmethod
-    def load(cls, path: str, domain: float = BOX_HALF) -> "DDF":
+    def load(cls, path: str, domain: float | None = None) -> "DDF":
         header, state = cls._read_network(path)
-        rep = cls(header["cfg"], float(header.get("domain", domain)))
+        rep = cls(header["cfg"], cls._artifact_domain(path, header, domain))
         rep.net.load_state_dict({k: v.float() for k, v in state.items()})
         rep.net.eval()
         rep._saved_path = path

@@ -10,8 +10,8 @@ import torch
 from torch import nn
 
 from ddfbench.errors import InputError
+from ddfbench.geometry import box_entry
 from ddfbench.models.ddf.network import DDFNet
-from ddfbench.models.ddf.rays import box_entry
 from ddfbench.representation import Budget, FitData, FitStats, Probe, Representation
 from ddfbench.train import Schedule, seed_everything, train_loop
 

@@ -54,6 +54,9 @@ def mesh_field(rep: Representation, dirs: np.ndarray):
     surface (state: their direction indices, (N, mesh_keep) int16)."""
 
     def field(points: np.ndarray, parent: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+        """Signed line-vote value (N,) float32 (normalized units, negative inside) at grid nodes (N,3), voted by
+        the lines along every direction of dirs (parent None) or along the parent's kept directions (N, mesh_keep)
+        indices into dirs; returns it and the indices (N, mesh_keep) int16 of this node's lines nearest zero."""
         idx = np.broadcast_to(np.arange(len(dirs)), (len(points), len(dirs))) if parent is None else parent
         s = rep.line_distance(np.repeat(points, idx.shape[1], axis=0), dirs[idx].reshape(-1, 3)).reshape(idx.shape)
         value, order = vote(rep, s)
