@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 from dataclasses import dataclass, field
@@ -36,12 +37,14 @@ class Samples:
         return int(self.x.shape[0])
 
     def subset(self, n: int, rng: np.random.Generator) -> "Samples":
-        """n samples drawn without replacement by `rng` (all of them, reordered, when n == len)."""
+        """n samples drawn without replacement by `rng` (all of them, reordered, when n == len): every
+        per-sample array (every field but meta) at the same rows."""
         if not 0 < n <= len(self):
             raise ValueError(f"subset of {n} from {len(self)} samples")
         idx = np.sort(rng.choice(len(self), size=n, replace=False))
-        pick = lambda a: None if a is None else a[idx]  # noqa: E731
-        return Samples(self.x[idx], pick(self.d), pick(self.t), pick(self.hit), pick(self.sdf), dict(self.meta))
+        return dataclasses.replace(self, meta=dict(self.meta), **{
+            f.name: getattr(self, f.name)[idx] for f in dataclasses.fields(self)
+            if f.name != "meta" and getattr(self, f.name) is not None})
 
     def save_npz(self, path: str) -> None:
         """Write atomically (temporary file, then rename) so a reader never sees half a file."""

@@ -51,6 +51,7 @@ def test_an_epoch_budget_on_a_label_subset_runs_and_is_recorded(tmp_path):
     assert rec["fit"]["steps"] == 4 and rec["fit"]["epochs"] == pytest.approx(2.0)  # 2 x 1000 / 500
     assert rec["fit"]["budget"] == "epochs"
     assert rec["sampling"]["n_samples"] == 1000 and rec["sampling"]["n_generated"] == 3000
+    assert rec["fit"]["entry_labels"] == 1000 and rec["fit"]["entry_per_batch"] > 0  # the subset keeps line_hit
     too_many = subprocess.run([sys.executable, "-m", "ddfbench", *args[:-1], "train.n_labels=5000",
                                f"out_dir={tmp_path}/b"], capture_output=True, text=True, timeout=600)
     assert too_many.returncode != 0 and "train.n_labels=5000" in too_many.stderr + too_many.stdout

@@ -289,3 +289,18 @@ def test_two_processes_building_one_dataset_leave_one_complete_file(tmp_path):
         paths = pool.map(_build_in_process, [str(tmp_path)] * 2)
     assert paths[0] == paths[1] and os.listdir(tmp_path) == [os.path.basename(paths[0])]
     assert len(Samples.load_npz(paths[0])) == 20000
+
+
+def test_a_label_subset_keeps_every_label_of_the_rows_it_draws():
+    n = 50
+    rng = np.random.default_rng(0)
+    full = Samples(x=rng.random((n, 3), dtype=np.float32), d=rng.random((n, 3), dtype=np.float32),
+                   t=np.arange(n, dtype=np.float32), hit=np.arange(n) % 2 == 0, line_hit=np.arange(n) % 3 != 1,
+                   sdf=np.arange(n, dtype=np.float32) - 25, meta={"strategy": "test"})
+    sub = full.subset(20, np.random.default_rng(1))
+    rows = sub.t.astype(int)  # t numbers the rows: every other array must come from the same ones
+    assert len(sub) == 20 and len(set(rows)) == 20
+    assert np.array_equal(sub.x, full.x[rows]) and np.array_equal(sub.d, full.d[rows])
+    assert np.array_equal(sub.hit, rows % 2 == 0) and np.array_equal(sub.line_hit, rows % 3 != 1)
+    assert np.array_equal(sub.sdf, rows - 25.0) and sub.meta == {"strategy": "test"}
+    assert Samples(x=full.x, sdf=full.sdf).subset(5, np.random.default_rng(1)).line_hit is None

@@ -95,5 +95,6 @@ def fit(rep: Representation, data: FitData, budget: Budget, probe: Probe | None 
         probe_fn=(lambda: probe(rep)) if probe is not None else None,
         grad_clip=float(cfg["grad_clip"]) or None, desc="ddf", state={"batches": gen},
     )
-    stats.extra.update(n_samples=n, hit_share=float(s.hit.mean()), n_params=rep.n_params())
+    stats.extra.update(n_samples=n, hit_share=float(s.hit.mean()), n_params=rep.n_params(),
+                       entry_labels=len(he), entry_per_batch=n_entry)  # the visibility labels it had
     return stats
