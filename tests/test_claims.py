@@ -179,3 +179,33 @@ def test_the_models_the_claims_compare_are_those_the_experiments_run():
     with initialize_config_dir(CONF_DIR, version_base="1.3"):
         cfg = compose("config", overrides=["+experiment=render_matched"], return_hydra_config=True)
     assert claims.SDF in str(cfg.hydra.sweeper.params.model).split(",")
+
+
+def test_claims_without_records_keep_their_previous_rows_marked_and_the_others_are_recomputed(tmp_path):
+    def write(recs, folder):
+        for experiment, rs in recs.items():
+            for r in rs:
+                write_json_atomic(str(tmp_path / folder / experiment / r["key"] / "record.json"), r)
+
+    write(records(), "all")
+    previous = tmp_path / "claims.md"
+    assert report_main([str(tmp_path / "all"), "--claims", "--out", str(previous)]) == 0
+    # the sampling sweep rerun elsewhere, by code "new", and now pov is worse than random
+    flipped = sampling({"surface": 1e-4, "pov": 9e-4, "random": 3e-4})
+    for r in flipped:
+        r["env"]["git_sha"] = "new"
+    write({"sampling": flipped}, "rerun")
+    out = tmp_path / "claims2.md"
+    assert report_main([str(tmp_path / "rerun"), "--claims", "--out", str(out), "--carry", str(previous)]) == 0
+    before, _ = claims.read_table(previous.read_text())
+    after, codes = claims.read_table(out.read_text())
+    assert [c.claim for c in after] == [c.claim for c in before]  # no row lost, none added, same order
+    marked = {line.split(" | ")[0].removeprefix("| † ") for line in out.read_text().splitlines() if line.startswith("| † ")}
+    fig6 = {"surface beats pov at equal counts", "pov beats random at equal counts", "surface beats random at equal counts"}
+    with_verdict = {c.claim for c in before if c.verdict != claims.NO_RECORDS}
+    assert marked == with_verdict - fig6 - {"GAN more accurate than CNN on 2D SDFs"}  # carried: all but what was rerun
+    v0, v1 = {c.claim: c.verdict for c in before}, {c.claim: c.verdict for c in after}
+    assert v0["pov beats random at equal counts"] == claims.CONFIRMED and v1["pov beats random at equal counts"] == claims.REFUTED
+    assert {k: v for k, v in v1.items() if k not in fig6} == {k: v for k, v in v0.items() if k not in fig6}
+    assert codes == ["new", "abc"]  # this run's code, then the carried rows' (the previous table's)
+    assert report_main([str(tmp_path / "rerun"), "--claims", "--out", str(out), "--carry", str(tmp_path / "none.md")]) == 2

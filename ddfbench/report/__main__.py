@@ -13,8 +13,9 @@ A report comes from one code commit: records from several commits are refused (e
 --allow-mixed-commits, which names the commits at the top of report.md.
 `--status [OVERRIDE ...]` prints which runs of the sweep are done, failed or missing instead
 (ddfbench.report.status).
-`--claims RESULTS [--out reports/claims.md]` writes the paper-claims table from the records of every
-experiment below RESULTS (ddfbench.report.claims).
+`--claims RESULTS [--out reports/claims.md] [--carry reports/claims.md]` writes the paper-claims table
+from the records of every experiment below RESULTS (ddfbench.report.claims); --carry keeps the previous
+table's rows for the claims whose experiments have no records there (marked †).
 """
 
 from __future__ import annotations
@@ -150,6 +151,8 @@ def main(argv: list[str] | None = None) -> int:
                         help="report records from several code commits (named at the top of report.md)")
     parser.add_argument("--claims", action="store_true",
                         help="write the paper-claims table from every experiment below the records folder")
+    parser.add_argument("--carry", metavar="CLAIMS_MD",
+                        help="with --claims: keep this previous claims.md's rows for claims without records")
     parser.add_argument("--status", nargs="*", metavar="OVERRIDE",
                         help="print done / failed / missing runs of the sweep instead of writing a report")
     args = parser.parse_args(argv)
@@ -168,7 +171,11 @@ def main(argv: list[str] | None = None) -> int:
         from ddfbench.report.claims import write_claims
 
         out = args.out or os.path.join("reports", "claims.md")
-        print(write_claims(args.records, out))
+        try:
+            print(write_claims(args.records, out, args.carry))
+        except InputError as exc:
+            print(f"ddfbench.report: {exc}", file=sys.stderr)
+            return 2
         print(f"wrote {out}")
         return 0
     kinds = None
