@@ -20,9 +20,6 @@ from ddfbench.models.ddf import DDF
 PRECISIONS = {"fp32": None, "bf16": torch.bfloat16, "fp16": torch.float16}
 
 
-box_entry_torch = box_entry  # the name ddfbench/bench/race.py imports; geometry.box_entry takes tensors too
-
-
 class DDFDepth:
     """Callable (origins (N,3), unit directions (N,3)) float32 tensors on rep's device -> t (N,) float32, inf on a miss.
 

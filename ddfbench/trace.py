@@ -113,12 +113,6 @@ class TraceResult:
     host_syncs: int = 0
 
 
-def clip_to_box(origins: torch.Tensor, directions: torch.Tensor, half: float) -> tuple[torch.Tensor, torch.Tensor]:
-    """geometry.box_entry without `meets` (ddfbench/bench/tracing.py's baseline loop): (t_enter, t_exit) (N,),
-    t_enter >= 0; t_enter > t_exit on a miss."""
-    return box_entry(origins, directions, half)[:2]
-
-
 def sphere_trace(field: TorchField, origins: np.ndarray, directions: np.ndarray, domain: float,
                  options: TraceOptions | None = None, device: str | torch.device = "cpu") -> TraceResult:
     """Trace N rays, origins (N, 3) and unit directions (N, 3), through `field` (see module docstring)."""

@@ -21,8 +21,9 @@ import torch
 from ddfbench.bench.context import DOMAIN, Context, preset
 from ddfbench.bench.results import SectionResult, Target, compare
 from ddfbench.bench.timing import measure_side_by_side, precisions
+from ddfbench.geometry import box_entry
 from ddfbench.models import load_family
-from ddfbench.models.ddf import DDF, box_entry
+from ddfbench.models.ddf import DDF
 from ddfbench.representation import Budget, FitData
 from ddfbench.bench.views import view_rays
 

@@ -40,7 +40,8 @@ from ddfbench.bench.results import SectionResult, Target, compare
 from ddfbench.bench.timing import Timing, measure_side_by_side
 from ddfbench.bench.views import incoherent_rays, view_rays
 from ddfbench.bench.tracing import grid_sdf, neural_sdf
-from ddfbench.ddf_infer import DDFDepth, box_entry_torch
+from ddfbench.ddf_infer import DDFDepth
+from ddfbench.geometry import box_entry
 from ddfbench.embree_pool import EmbreePool
 from ddfbench.models.ddf import DDF
 from ddfbench.representation import Budget, FitData
@@ -78,7 +79,7 @@ def train_ddf(ctx: Context, samples, overrides: dict) -> tuple[DDF, dict]:
 
 def bare_forward(rep: DDF, o: torch.Tensor, d: torch.Tensor, chunk: int, precision: str) -> Callable[[], None]:
     """The network alone on the box-entry points of the rays (computed once, outside the timing)."""
-    x = o + box_entry_torch(o, d, rep.domain)[0][:, None] * d
+    x = o + box_entry(o, d, rep.domain)[0][:, None] * d
     dtype = torch.bfloat16 if precision == "bf16" else None
 
     @torch.no_grad()

@@ -23,7 +23,8 @@ from ddfbench.models.grid_sdf import GridSDF
 from ddfbench.models.neural_sdf import NeuralSDF
 from ddfbench.representation import Budget, FitData
 from ddfbench.sampling.oracle_sdf import oracle_sdf_samples
-from ddfbench.trace import TorchField, clip_to_box, sphere_trace
+from ddfbench.geometry import box_entry
+from ddfbench.trace import TorchField, sphere_trace
 
 TARGET = Target(">=", 3.0)
 
@@ -32,7 +33,7 @@ def naive_trace(field: TorchField, origins: np.ndarray, directions: np.ndarray, 
                 eps: float = 1e-5, eps_abs: float = 1e-6, max_steps: int = 256) -> tuple[np.ndarray, int]:
     """The baseline loop: every ray every step, field evaluated twice per step. Returns (t (inf unless hit), evals)."""
     o, d = torch.from_numpy(origins), torch.from_numpy(directions)
-    t_enter, t_exit = clip_to_box(o, d, domain)
+    t_enter, t_exit, _ = box_entry(o, d, domain)
     t = t_enter.clone()
     evals = 0
     with torch.no_grad():

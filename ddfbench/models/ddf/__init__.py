@@ -43,11 +43,10 @@ cfg keys (conf/model/ddf.yaml documents each):
   storage   storage_dtype (float32 | float16 state dict), eval_batch
 """
 
-from ddfbench.geometry import box_entry  # re-exported: ddfbench/bench/ddf.py imports it from here
 from ddfbench.models.ddf.family import DDF
 from ddfbench.models.ddf.fit import line_entry_labels
 from ddfbench.models.ddf.mesh import fibonacci_directions, line_vote
 from ddfbench.models.ddf.rays import unit_normals
 
 FAMILY = DDF
-__all__ = ["DDF", "FAMILY", "box_entry", "fibonacci_directions", "line_entry_labels", "line_vote", "unit_normals"]
+__all__ = ["DDF", "FAMILY", "fibonacci_directions", "line_entry_labels", "line_vote", "unit_normals"]
