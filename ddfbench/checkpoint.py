@@ -69,7 +69,7 @@ class Checkpoint:
         try:  # tensors, numbers, strings and containers only: a results folder may come from someone else
             state = torch.load(self.path, map_location="cpu", weights_only=True)
         except Exception as exc:  # truncated, corrupt or holding other objects: start over rather than fail the run
-            log.warning("%s: unreadable (%s): the fit starts over", self.path, exc)
+            log.warning("%s: unreadable, or of an older format (%s): the fit starts over", self.path, exc)
             return None
         if not isinstance(state, dict) or state.get("format") != FORMAT or state.get("tag") != self.tag \
                 or state.get("fit") != fit:

@@ -217,5 +217,7 @@ def run(cfg: Mapping[str, Any], choices: Mapping[str, str] | None = None,
     runs.write_json_atomic(rpath, out)
     if out["status"] == "ok":  # the record holds the fit now. A failed record (rerun by the next sweep) and
         Checkpoint(os.path.join(rdir, CHECKPOINT_FILE)).remove()  # a killed process keep it: the rerun resumes
+    elif os.path.exists(os.path.join(rdir, CHECKPOINT_FILE)):
+        log.info("run %s keeps its fit checkpoint: a rerun by the same code resumes it (force=true fits anew)", key)
     track_record(cfg.get("tracking"), str(cfg.get("out_dir", "results")), out, rdir)
     return out

@@ -37,8 +37,8 @@ class Samples:
         return int(self.x.shape[0])
 
     def subset(self, n: int, rng: np.random.Generator) -> "Samples":
-        """n samples drawn without replacement by `rng` (all of them, reordered, when n == len): every
-        per-sample array (every field but meta) at the same rows."""
+        """n samples drawn without replacement by `rng`, in their original order: every per-sample array
+        (every field but meta) at the same rows."""
         if not 0 < n <= len(self):
             raise ValueError(f"subset of {n} from {len(self)} samples")
         idx = np.sort(rng.choice(len(self), size=n, replace=False))

@@ -9,6 +9,7 @@ import torch
 import trimesh
 
 from ddfbench.errors import InputError
+from ddfbench.geometry import BOX_HALF
 from ddfbench.models import available_families, load_family
 
 STORING = [f for f in ("ddf", "neural_sdf", "gan_sdf", "grid_sdf") if f in available_families()]
@@ -44,4 +45,4 @@ def test_mesh_artifact_takes_the_callers_domain(tmp_path):
     rep.mesh = trimesh.creation.box()
     path = rep.save(str(tmp_path / "mesh"))
     assert load_family("mesh").load(path, domain=0.7).domain == 0.7
-    assert load_family("mesh").load(path).domain == 0.6
+    assert load_family("mesh").load(path).domain == BOX_HALF

@@ -209,3 +209,5 @@ def test_claims_without_records_keep_their_previous_rows_marked_and_the_others_a
     assert {k: v for k, v in v1.items() if k not in fig6} == {k: v for k, v in v0.items() if k not in fig6}
     assert codes == ["new", "abc"]  # this run's code, then the carried rows' (the previous table's)
     assert report_main([str(tmp_path / "rerun"), "--claims", "--out", str(out), "--carry", str(tmp_path / "none.md")]) == 2
+    (tmp_path / "notes.md").write_text("# notes\n\nno table here\n")
+    assert report_main([str(tmp_path / "rerun"), "--claims", "--out", str(out), "--carry", str(tmp_path / "notes.md")]) == 2

@@ -160,6 +160,8 @@ def main(argv: list[str] | None = None) -> int:
         args.records = args.status.pop(0)  # `--status results/<experiment>`: the folder came after the flag
     if args.records is None:
         parser.error("the folder of run records is required, e.g. results/ablation")
+    if args.carry and not args.claims:
+        parser.error("--carry goes with --claims")
     if args.status is not None:
         from ddfbench.report import status
 

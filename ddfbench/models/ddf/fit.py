@@ -95,6 +95,7 @@ def fit(rep: Representation, data: FitData, budget: Budget, probe: Probe | None 
         probe_fn=(lambda: probe(rep)) if probe is not None else None,
         grad_clip=float(cfg["grad_clip"]) or None, desc="ddf", state={"batches": gen},
     )
-    stats.extra.update(n_samples=n, hit_share=float(s.hit.mean()), n_params=rep.n_params(),
-                       entry_labels=len(he), entry_per_batch=n_entry)  # the visibility labels it had
+    stats.extra.update(n_samples=n, hit_share=float(s.hit.mean()), n_params=rep.n_params(),  # the entry
+                       entry_labels=len(he) if n_entry else 0, entry_hits=n_hit_entries if n_entry else 0,
+                       entry_per_batch=n_entry)  # visibility labels it trained on (0: none)
     return stats
