@@ -60,16 +60,21 @@ class Metric:
         return _read(record, ("metrics", FLOOR_KEY, *self.path[1:]))
 
 
+def as_float(value: Any) -> float:
+    """float(value); NaN where value is None or not a number."""
+    try:
+        return float(value)
+    except (TypeError, ValueError):
+        return float("nan")
+
+
 def _read(record: Mapping[str, Any], path: tuple[str, ...]) -> float:
     node: Any = record
     for key in path:
         if not isinstance(node, Mapping) or key not in node:
             return float("nan")
         node = node[key]
-    try:
-        return float(node)
-    except (TypeError, ValueError):
-        return float("nan")
+    return as_float(node)
 
 
 def fscore(radius: float) -> Metric:

@@ -10,10 +10,11 @@ finished, the shape, a number, and the chamfer L2 (through ddfbench.metric_regis
 
 from __future__ import annotations
 
-import math
 from typing import Any, Iterable
 
-from ddfbench.metric_registry import by_name
+from ddfbench.metric_registry import as_float, by_name
+
+__all__ = ["Record", "as_float", "chamfer_l2", "ok_records", "shape_name"]
 
 Record = dict[str, Any]
 
@@ -26,14 +27,6 @@ def ok_records(records: Iterable[Record]) -> list[Record]:
 def shape_name(rec: Record) -> str:
     """The record's shape name ("None" where it has none)."""
     return str((rec.get("shape") or {}).get("name"))
-
-
-def as_float(value: Any) -> float:
-    """float(value); NaN where value is None or not a number."""
-    try:
-        return float(value)
-    except (TypeError, ValueError):
-        return math.nan
 
 
 def chamfer_l2(rec: Record) -> float:
