@@ -100,6 +100,9 @@ METRICS: list[Metric] = [
     *_sided("gt_to_rec", "GT→rec"),
     *_sided("rec_to_gt", "rec→GT"),
     Metric("normal_consistency", ("metrics", "normal_consistency"), "NC", better="high", penalty=0.0),
+    # topology of the reconstruction (metrics.topology); a table's mean of `closed` is the share of closed meshes
+    Metric("closed", ("metrics", "closed"), "closed", better="high", penalty=0.0),
+    Metric("components", ("metrics", "components"), "pieces", better="", penalty=0.0),
     Metric("mask_iou", ("metrics", "mask_iou"), "mask IoU", better="high"),
     Metric("depth_mae", ("metrics", "depth_mae"), "depth MAE ×10³", 1e3),
     Metric("normal_angle_deg", ("metrics", "normal_angle_deg"), "normal err °"),

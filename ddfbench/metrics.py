@@ -81,6 +81,16 @@ def matched_normal_consistency(na: np.ndarray, nb: np.ndarray, a_to_b: np.ndarra
     return float(0.5 * (ab.mean() + ba.mean()))
 
 
+def topology(mesh: trimesh.Trimesh) -> dict[str, Any]:
+    """Whether a non-empty mesh is closed and how many pieces it has, after merging coincident vertices:
+    closed (bool): every edge is shared by exactly two faces (trimesh's is_watertight), so the surface
+    bounds a volume; components (int): the connected pieces, faces joined by shared edges (a floater or a
+    detached sliver is one more)."""
+    merged = trimesh.Trimesh(np.asarray(mesh.vertices), np.asarray(mesh.faces), process=True)
+    labels = trimesh.graph.connected_component_labels(merged.face_adjacency, node_count=len(merged.faces))
+    return {"closed": bool(merged.is_watertight), "components": int(labels.max()) + 1 if len(labels) else 0}
+
+
 def point_to_surface(points: np.ndarray, mesh: trimesh.Trimesh) -> np.ndarray:
     """Exact unsigned distance (N,) float64 from points (N,3) to the triangles of mesh: an oracle of the mesh with
     the backend that answers every query here (open3d, or Warp where open3d is not installed)."""
@@ -144,6 +154,7 @@ def geometry_metrics(
         out = distance_metrics(d_gr, d_rg, radii)
         out["normal_consistency"] = matched_normal_consistency(gt_n, rec_n, i_gr, i_rg)
         out["empty_reconstruction"] = False
+        out.update(topology(rec))
         if with_point_to_surface:
             to_rec = point_to_surface(gt_pts, rec)
             to_gt = point_to_surface(rec_pts, gt)

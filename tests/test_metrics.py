@@ -86,6 +86,26 @@ def test_empty_reconstruction_gets_penalty_not_exception():
     assert m["empty_reconstruction"] is True
     assert m["fscore"]["0.01"] == 0.0
     assert np.isfinite(m["chamfer_l2"]) and m["chamfer_l2"] >= PENALTY_DISTANCE**2
+    assert m["closed"] == 0.0 and m["components"] == 0
+
+
+def test_topology_counts_pieces_and_finds_holes():
+    sphere = trimesh.creation.icosphere(2, 0.3)
+    far = sphere.copy().apply_translation((0.7, 0, 0))
+    assert metrics.topology(sphere) == {"closed": True, "components": 1}
+    assert metrics.topology(trimesh.util.concatenate([sphere, far])) == {"closed": True, "components": 2}
+    box = trimesh.creation.box(extents=(0.2, 0.2, 0.2))
+    corner_to_corner = trimesh.util.concatenate([box, box.copy().apply_translation((0.2, 0.2, 0.2))])
+    assert metrics.topology(corner_to_corner) == {"closed": True, "components": 2}  # one shared vertex, no edge
+    holed = trimesh.Trimesh(sphere.vertices, sphere.faces[1:], process=False)
+    assert metrics.topology(holed) == {"closed": False, "components": 1}
+    # a triangle soup (every face its own three vertices) is the same closed surface once merged
+    soup = trimesh.Trimesh(sphere.vertices[sphere.faces].reshape(-1, 3),
+                           np.arange(3 * len(sphere.faces)).reshape(-1, 3), process=False)
+    assert not soup.is_watertight and metrics.topology(soup) == {"closed": True, "components": 1}
+    # geometry_metrics records it for a reconstruction
+    m = metrics.geometry_metrics(sphere, holed, 1000, [0.01], seed=0, with_point_to_surface=False)
+    assert m["closed"] is False and m["components"] == 1
 
 
 def test_geometry_metrics_equal_brute_force_on_its_own_samples():
