@@ -8,7 +8,8 @@ with conf/scene/<NAME>.yaml (or `record`: the run's own scene) against the GT me
 float16 storage level renders its rounded weights). A sweep whose probes needed a small point count
 (convergence: 20k) is so compared with targets stated at the 100k points of every other experiment,
 and gets image metrics it did not render, without refitting. The records are not changed. DIR gets
-table.md / table.csv (report.tables: one row per configuration, seeds pooled, empty meshes at their
+table.md (its first line: the command, the records' code commits and the measuring code's) /
+table.csv (report.tables: one row per configuration, seeds pooled, empty meshes at their
 penalty, the noise floor at this point count) and runs.csv (a row per run). A run whose artifacts
 cannot be read gets one line on stderr naming its folder; the others are still written (exit 1).
 """
@@ -32,7 +33,7 @@ from ddfbench.geometry import BOX_HALF
 from ddfbench.metrics import geometry_metrics
 from ddfbench.models import load_family
 from ddfbench.report import tables
-from ddfbench.runs import find_records
+from ddfbench.runs import code_commits, code_sha, find_records
 
 RECORD_SCENE = "record"  # --scene record: each run's own scene as its record gives it
 
@@ -122,7 +123,9 @@ def main(argv: list[str] | None = None) -> int:
         os.makedirs(args.out, exist_ok=True)
         df = tables.summarize(done)
         command = f"`python -m ddfbench.reevaluate {' '.join(argv if argv is not None else sys.argv[1:])}`"
-        md = f"{command}: {len(done)} runs measured again ({failed} unreadable).\n\n" + tables.to_markdown(df)
+        md = (f"{command}: {len(done)} runs measured again ({failed} unreadable), records of code "
+              f"{', '.join(c[:7] for c in code_commits(done))}, measured by code {(code_sha() or 'unknown')[:7]}.\n\n"
+              + tables.to_markdown(df))
         with open(os.path.join(args.out, "table.md"), "w") as fh:
             fh.write(md)
         tables.to_csv(df, os.path.join(args.out, "table.csv"))

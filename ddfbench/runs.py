@@ -132,7 +132,7 @@ def _git_sha() -> str | None:
     return _git("rev-parse", "HEAD")
 
 
-def _code_sha() -> str | None:
+def code_sha() -> str | None:
     """The last commit that changed the code (CODE_PATHS): committing reports midway leaves it unchanged."""
     return _git("log", "-1", "--format=%H", "--", *CODE_PATHS)
 
@@ -169,7 +169,7 @@ def environment(device: str, threads: int) -> dict[str, Any]:
     gpu = torch.cuda.get_device_name(0) if device.startswith("cuda") and torch.cuda.is_available() else None
     return {
         "git_sha": _git_sha(),
-        "code_sha": _code_sha(),
+        "code_sha": code_sha(),
         "versions": {"python": platform.python_version(), "torch": torch.__version__, "numpy": numpy.__version__,
                      "trimesh": trimesh.__version__, **{name: _installed(name) for name in OPTIONAL}},
         "device": device,

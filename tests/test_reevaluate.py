@@ -41,6 +41,7 @@ def test_reevaluation_at_the_records_settings_reproduces_them(tmp_path, capsys):
         assert row["chamfer_l2"] == pytest.approx(m["chamfer_l2"], rel=1e-5)
         assert row["fscore@0.01"] == pytest.approx(m["fscore"]["0.01"], abs=1e-9)
         assert row["noise_floor_chamfer_l2"] == pytest.approx(m["noise_floor"]["chamfer_l2"], rel=1e-5)
+        assert row["closed"] == m["closed"] and row["components"] == m["components"] >= 1
         # rendered again from the saved network / grid on the same cameras: the image metrics of the run
         assert row["mask_iou"] == pytest.approx(m["mask_iou"], abs=1e-9) and 0.5 < row["mask_iou"]
         assert row["depth_mae"] == pytest.approx(m["depth_mae"], rel=1e-4)
@@ -49,6 +50,8 @@ def test_reevaluation_at_the_records_settings_reproduces_them(tmp_path, capsys):
                  "--threads", "1"]) == 0
     assert (pd.read_csv(tmp_path / "re64" / "runs.csv")["depth_mae"].values != runs["depth_mae"].values).any()
     table = pd.read_csv(tmp_path / "re" / "table.csv")
+    code = recs["grid_sdf", 0]["env"]["code_sha"]
+    assert code and f"records of code {code[:7]}, measured by code {code[:7]}." in (tmp_path / "re" / "table.md").read_text()
     assert set(table.loc[table["n"] == 2, "model"]) == {"grid_sdf", "neural_sdf"}
     # another point count is another measurement, and without a scene there are no image metrics
     assert main([str(tmp_path / "single"), "--out", str(tmp_path / "re5"), "--n-points", "500"]) == 0
