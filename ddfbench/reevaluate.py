@@ -10,7 +10,7 @@ float16 storage level renders its rounded weights). A sweep whose probes needed 
 and gets image metrics it did not render, without refitting. The records are not changed. DIR gets
 table.md (its first line: the command, the records' code commits and the measuring code's) /
 table.csv (report.tables: one row per configuration, seeds pooled, empty meshes at their
-penalty, the noise floor at this point count) and runs.csv (a row per run). A run whose artifacts
+penalty, the noise floor at this point count) and runs.csv (a row per run, with its swept values). A run whose artifacts
 cannot be read gets one line on stderr naming its folder; the others are still written (exit 1).
 """
 
@@ -23,7 +23,6 @@ import sys
 import tempfile
 from typing import Any
 
-import pandas as pd
 import torch
 import trimesh
 
@@ -129,8 +128,7 @@ def main(argv: list[str] | None = None) -> int:
         with open(os.path.join(args.out, "table.md"), "w") as fh:
             fh.write(md)
         tables.to_csv(df, os.path.join(args.out, "table.csv"))
-        runs = [{k: v for k, v in tables.record_row(r).items() if not k.startswith("_")} for r in done]
-        pd.DataFrame(runs).to_csv(os.path.join(args.out, "runs.csv"), index=False)
+        tables.per_run(done).to_csv(os.path.join(args.out, "runs.csv"), index=False)
         print(md, end="")
     return 1 if failed else 0
 

@@ -192,6 +192,11 @@ def test_rows_are_labelled_by_the_overrides_that_vary():
     df = tables.summarize(recs)
     assert "capacity" in df.columns and "train.max_seconds" not in df.columns and "out_dir" not in df.columns
     assert sorted(df["capacity"]) == ["c1", "c2"]
+    runs = tables.per_run(recs + [make_record(overrides=["capacity=c2"], width=128, seed=1)])
+    assert list(runs.columns[:7]) == ["key", "status", "error", "experiment", "model", "family", "shape"]
+    assert set(runs.columns[7:9]) == {"capacity", "model.width"}  # the swept values, after the shape
+    assert list(runs["capacity"]) == ["c1", "c2", "c2"] and list(runs["seed"]) == [0, 0, 1]
+    assert not any(c.startswith("_") for c in runs.columns)
 
 
 def test_markdown_latex_csv_render_the_same_numbers(tmp_path):

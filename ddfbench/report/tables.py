@@ -102,6 +102,20 @@ def label_keys(rows: list[dict[str, Any]]) -> list[str]:
     return [k for k in keys if len({r["_labels"].get(k) for r in rows}) > 1]
 
 
+def per_run(records: Iterable[dict[str, Any]]) -> pd.DataFrame:
+    """One row per record: record_row's columns, with each varying override key (e.g. `capacity`) after
+    `shape`, so a run can be told apart from the other runs of its configuration."""
+    rows = [record_row(r) for r in records]
+    labels = label_keys(rows) if rows else []
+    out = []
+    for r in rows:
+        row = {k: v for k, v in r.items() if not k.startswith("_")}
+        at = list(row).index("shape") + 1
+        items = list(row.items())
+        out.append(dict(items[:at] + [(k, r["_labels"].get(k)) for k in labels] + items[at:]))
+    return pd.DataFrame(out)
+
+
 def summarize(records: Iterable[dict[str, Any]]) -> pd.DataFrame:
     """One row per configuration (seeds pooled).
 
