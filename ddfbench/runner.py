@@ -28,7 +28,7 @@ from ddfbench.oracle import Oracle
 from ddfbench.representation import Budget, FitData, Representation
 from ddfbench.shapes import load_shape
 from ddfbench.tracking import track_record
-from ddfbench.train import resolve_device, seed_everything
+from ddfbench.train import resolve_device, seed_everything, strict_fp32
 
 log = logging.getLogger(__name__)
 
@@ -201,6 +201,8 @@ def run(cfg: Mapping[str, Any], choices: Mapping[str, str] | None = None,
     }
     try:
         device = resolve_device(device or str(cfg.get("train", {}).get("device", "cpu")))
+        if device.startswith("cuda"):
+            strict_fp32()  # a CUDA record computes in float32, as a CPU one
         out["env"] = runs.environment(device, threads)
         if bad_level is not None:
             raise bad_level

@@ -61,6 +61,14 @@ def resolve_device(name: str, option: str = "train.device") -> str:
     raise InputError(f"{option} '{name}': unknown device (cpu | cuda | auto)")
 
 
+def strict_fp32() -> None:
+    """TF32 off for CUDA matrix products and cuDNN convolutions, so that a CUDA fit or render computes in
+    the same float32 as a CPU one (PyTorch lets cuDNN convolutions, such as the GAN generator's Conv1d,
+    run in TF32 by default, ~1e-3 relative). The bench sets its precisions itself (bench.timing)."""
+    torch.backends.cuda.matmul.allow_tf32 = False
+    torch.backends.cudnn.allow_tf32 = False
+
+
 def seed_everything(seed: int) -> None:
     """Seed python, numpy and torch (all devices) so a fit is repeatable on one machine."""
     random.seed(int(seed))
@@ -184,7 +192,9 @@ def train_loop(
 
     # On CUDA the loss values come back to the host once per `weight_check_every` steps (one stacked copy),
     # and the clock is read, synchronized, at the same points: no per-step round trip. The budget and the
-    # NaN guard then act at that granularity. On the CPU (no queue to wait for) both happen every step.
+    # NaN guard then act at that granularity. The first step (cold: kernel choice, allocator) is a window
+    # of its own, so the loss curve says what it cost and a warm rate can leave it out. On the CPU (no
+    # queue to wait for) both happen every step.
     host_every = int(weight_check_every) if budget.device.startswith("cuda") else 1
     pending: list[torch.Tensor] = []
     train_s, probe_s, step, stop = 0.0, 0.0, 0, "max_steps"
@@ -235,7 +245,7 @@ def train_loop(
             stats.status, stop = "failed", "nonfinite"
             stats.message = f"step {step}: weights '{bad}' became non-finite"
             break
-        if step % host_every and step < budget.max_steps:
+        if step % host_every and step != 1 and step < budget.max_steps:
             continue
         train_s += clock() - window_t0  # after the queued CUDA work of the window
         window_t0 = None

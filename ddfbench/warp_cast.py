@@ -4,7 +4,9 @@ Warp's own `mesh_query_ray` is not watertight: its BVH boxes are the triangles' 
 its slab test rounds, so a ray entering a cube through an edge can miss both flat boxes there and report
 the far side (1 of 104 vertex/edge rays of tests/hard_cases/test_vertex_edge_rays.py). Here the BVH
 (`wp.Bvh`) is built over triangle boxes padded by a few ulps, and each candidate triangle gets the
-watertight test of Woop, Benthin and Wald (2013), so rays through shared edges and vertices hit.
+watertight test of Woop, Benthin and Wald (2013), so rays through shared edges and vertices hit. The
+module compiles without FMA contraction and builds an SAH tree on every device, so CPU and CUDA answer
+alike.
 
 The optional `gpu` extra installs Warp (`pip install -e ".[gpu]"`). The oracle (`oracle.backend: warp`,
 which then answers every query through Warp and needs no open3d) and the mesh family (`model.backend:
@@ -39,6 +41,11 @@ def _warp():
 
 
 wp = _warp()
+# No FMA contraction: the watertight test needs each edge function computed the same way in both triangles
+# of an edge, so that a ray on the edge gets exactly 0 (then float64 decides). NVRTC contracts across
+# statements by default (--fmad=true), Warp's CPU build only within one, so without this a CUDA cast
+# could let a ray slip through a shared edge that the CPU cast hits.
+wp.set_module_options({"fuse_fp": False})
 
 
 @wp.func
@@ -165,7 +172,8 @@ class WarpCaster:
         self._indices = wp.array(faces.reshape(-1), dtype=wp.int32, device=wdev)
         self._lowers = wp.array(corners.min(axis=1) - pad, dtype=wp.vec3, device=wdev)
         self._uppers = wp.array(corners.max(axis=1) + pad, dtype=wp.vec3, device=wdev)
-        self._bvh = wp.Bvh(self._lowers, self._uppers)
+        # SAH on every device (Warp's default on CUDA is LBVH, whose queries are slower): one tree for both
+        self._bvh = wp.Bvh(self._lowers, self._uppers, constructor="sah")
         wp.synchronize_device(wdev)  # built on Warp's stream; the queries launch on torch's
         self._mesh = None  # wp.Mesh for closest-point queries, built on first use
 

@@ -31,6 +31,17 @@ TOLERANCE = {"mesh": (1.0, 1e-5), "grid_sdf": (0.995, 1e-4), "neural_sdf": (0.99
 FAMILIES = [f for f in TOLERANCE if has_family(f)]
 
 
+@pytest.fixture(scope="module", autouse=True)
+def float32_on_the_device():
+    """CPU and device both in float32: TF32 off for matrix products and cuDNN convolutions (train.strict_fp32)."""
+    from ddfbench.train import strict_fp32
+
+    saved = torch.backends.cuda.matmul.allow_tf32, torch.backends.cudnn.allow_tf32
+    strict_fp32()
+    yield
+    torch.backends.cuda.matmul.allow_tf32, torch.backends.cudnn.allow_tf32 = saved
+
+
 def rays() -> tuple[np.ndarray, np.ndarray]:
     o1, d1 = view_rays(32)
     o2, d2 = incoherent_rays(1000, seed=3)

@@ -129,6 +129,26 @@ def test_nan_guard_fires_on_forced_divergence():
     assert stats.steps < 1000
 
 
+def test_cuda_cadence_times_the_cold_step_apart():
+    """On CUDA the host reads losses and the clock once per weight_check_every steps; the first step is
+    a window of its own, so a 20-step fit's curve says how long its cold step took (bench.training's warm
+    rate divides by the seconds after it). The cadence is chosen by the budget's device name alone, so a
+    CPU module under device="cuda" runs the CUDA bookkeeping."""
+    model, step_fn, _ = regression()
+    opt = torch.optim.SGD(model.parameters(), lr=0.01)
+
+    def cold_first(step):
+        time.sleep(0.2 if step == 0 else 0.001)
+        return step_fn(step)
+
+    stats = train_loop(model, opt, cold_first, Budget(max_steps=20, max_seconds=1e6, n_probes=0, device="cuda"),
+                       weight_check_every=50, quiet=True)
+    seconds = {step: sec for step, sec, _ in stats.loss_curve}
+    assert sorted(seconds) == list(range(1, 21)) and stats.status == "ok"
+    assert 0.2 <= seconds[1] < stats.seconds and len({seconds[s] for s in range(2, 21)}) == 1
+    assert stats.seconds - seconds[1] < 0.2  # the 19 warm steps
+
+
 def test_nan_guard_catches_weights_that_go_bad_without_a_bad_loss():
     model, step_fn, _ = regression()
     opt = torch.optim.SGD(model.parameters(), lr=0.0)

@@ -1,7 +1,8 @@
-"""Section 10, field cost: what one point of a network SDF costs to evaluate, and how close to the CPU's
+"""Section 10, field cost: what one point of a network SDF costs to evaluate, and how close to the device's
 matrix-product speed each network gets, measured side by side in one process.
 
-Figures (no grad, random points in the field box, `threads` torch threads):
+Figures (no grad, random points in the field box, networks, points and matrices on the bench's device,
+`threads` torch threads):
 - the GAN-SDF generator (the thesis' Conv1d stack) on `points` points at each eval chunk in `chunks`
   (points per call): points/s against the tuned neural SDF's field on one call of 65,536 points (the
   SDF families' batch);
@@ -49,12 +50,13 @@ def flops_per_point(net: nn.Module, in_dim: int = 3) -> int:
 def run(ctx: Context) -> SectionResult:
     s, result = ctx.sizes, SectionResult()
     n, side = int(s["points"]), int(s["gemm"])
-    sdf = load_family("neural_sdf")(model_preset(s["sdf_preset"]))
-    gan = load_family("gan_sdf")(model_preset(s["gan_preset"]))
+    dev = ctx.device
+    sdf = load_family("neural_sdf")(model_preset(s["sdf_preset"])).to(dev)
+    gan = load_family("gan_sdf")(model_preset(s["gan_preset"])).to(dev)
     gen = torch.Generator().manual_seed(0)
-    points = (torch.rand(n, 3, generator=gen) * 2 - 1) * DOMAIN
-    sdf_points = (torch.rand(SDF_BATCH, 3, generator=gen) * 2 - 1) * DOMAIN
-    a, b = torch.rand(side, side, generator=gen), torch.rand(side, side, generator=gen)
+    points = ((torch.rand(n, 3, generator=gen) * 2 - 1) * DOMAIN).to(dev)
+    sdf_points = ((torch.rand(SDF_BATCH, 3, generator=gen) * 2 - 1) * DOMAIN).to(dev)
+    a, b = torch.rand(side, side, generator=gen).to(dev), torch.rand(side, side, generator=gen).to(dev)
 
     def gan_at(chunk: int):
         def fn():
