@@ -100,9 +100,10 @@ METRICS: list[Metric] = [
     *_sided("gt_to_rec", "GT→rec"),
     *_sided("rec_to_gt", "rec→GT"),
     Metric("normal_consistency", ("metrics", "normal_consistency"), "NC", better="high", penalty=0.0),
-    # topology of the reconstruction (metrics.topology); a table's mean of `closed` is the share of closed meshes
+    # topology of the reconstruction (metrics.topology); a table's mean of `closed` is the share of closed
+    # meshes; an empty mesh is not closed and has no piece count (its row's cell says "(of k)")
     Metric("closed", ("metrics", "closed"), "closed", better="high", penalty=0.0),
-    Metric("components", ("metrics", "components"), "pieces", better="", penalty=0.0),
+    Metric("components", ("metrics", "components"), "components", better=""),
     Metric("mask_iou", ("metrics", "mask_iou"), "mask IoU", better="high"),
     Metric("depth_mae", ("metrics", "depth_mae"), "depth MAE ×10³", 1e3),
     Metric("normal_angle_deg", ("metrics", "normal_angle_deg"), "normal err °"),

@@ -12,6 +12,8 @@ from typing import Any, Sequence
 
 import numpy as np
 import trimesh
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from ddfbench.metric_registry import fscore, penalties
@@ -82,13 +84,22 @@ def matched_normal_consistency(na: np.ndarray, nb: np.ndarray, a_to_b: np.ndarra
 
 
 def topology(mesh: trimesh.Trimesh) -> dict[str, Any]:
-    """Whether a non-empty mesh is closed and how many pieces it has, after merging coincident vertices:
-    closed (bool): every edge is shared by exactly two faces (trimesh's is_watertight), so the surface
-    bounds a volume; components (int): the connected pieces, faces joined by shared edges (a floater or a
-    detached sliver is one more)."""
+    """Whether a non-empty mesh is closed and how many pieces it has, after merging coincident vertices
+    and dropping faces that repeat a vertex (zero-area slivers marching cubes can leave):
+    closed (bool): every edge is shared by exactly two faces (trimesh's is_watertight; winding is not
+    checked); components (int): the connected pieces, faces joined across every shared edge, a
+    non-manifold one (3+ faces) too (a floater or a detached sliver is one more)."""
     merged = trimesh.Trimesh(np.asarray(mesh.vertices), np.asarray(mesh.faces), process=True)
-    labels = trimesh.graph.connected_component_labels(merged.face_adjacency, node_count=len(merged.faces))
-    return {"closed": bool(merged.is_watertight), "components": int(labels.max()) + 1 if len(labels) else 0}
+    merged.update_faces(merged.nondegenerate_faces(height=None))
+    n = len(merged.faces)
+    if n == 0:
+        return {"closed": False, "components": 0}
+    edge, face = merged.edges_unique_inverse, merged.edges_face  # (3n,) each face edge's unique id, its face
+    order = np.argsort(edge, kind="stable")
+    same = edge[order][1:] == edge[order][:-1]  # consecutive face edges on one unique edge: join their faces
+    a, b = face[order][:-1][same], face[order][1:][same]
+    graph = coo_matrix((np.ones(len(a)), (a, b)), shape=(n, n))
+    return {"closed": bool(merged.is_watertight), "components": int(connected_components(graph, directed=False)[0])}
 
 
 def point_to_surface(points: np.ndarray, mesh: trimesh.Trimesh) -> np.ndarray:

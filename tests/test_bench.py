@@ -175,6 +175,7 @@ def test_flops_per_point_counts_linear_and_conv_multiply_adds():
 
     mlp = nn.Sequential(nn.Linear(3, 10), nn.ReLU(), nn.Linear(10, 4), nn.Linear(4, 1))
     assert flops_per_point(mlp) == 2 * (30 + 40 + 4)
+    assert flops_per_point(mlp.to("meta")) == 2 * (30 + 40 + 4)  # counted on the network's own device
     # the thesis generator: Linear 3->256; Conv1d 1->16, k 7 on 256 (250 out); pool 3 (248); Conv1d 16->32,
     # k 5 (244 out); pool 3 (242); Linear 32*242 -> 1
     macs = 3 * 256 + 16 * 250 * 7 + 32 * 244 * 16 * 5 + 32 * 242

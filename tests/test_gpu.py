@@ -33,13 +33,11 @@ FAMILIES = [f for f in TOLERANCE if has_family(f)]
 
 @pytest.fixture(scope="module", autouse=True)
 def float32_on_the_device():
-    """CPU and device both in float32: TF32 off for matrix products and cuDNN convolutions (train.strict_fp32)."""
-    from ddfbench.train import strict_fp32
+    """CPU and device both in float32: TF32 off for matrix products and cuDNN convolutions."""
+    from ddfbench.bench.timing import precision_context
 
-    saved = torch.backends.cuda.matmul.allow_tf32, torch.backends.cudnn.allow_tf32
-    strict_fp32()
-    yield
-    torch.backends.cuda.matmul.allow_tf32, torch.backends.cudnn.allow_tf32 = saved
+    with precision_context("fp32", DEVICE):
+        yield
 
 
 def rays() -> tuple[np.ndarray, np.ndarray]:

@@ -86,7 +86,7 @@ def test_empty_reconstruction_gets_penalty_not_exception():
     assert m["empty_reconstruction"] is True
     assert m["fscore"]["0.01"] == 0.0
     assert np.isfinite(m["chamfer_l2"]) and m["chamfer_l2"] >= PENALTY_DISTANCE**2
-    assert m["closed"] == 0.0 and m["components"] == 0
+    assert m["closed"] == 0.0 and "components" not in m  # no piece count for an empty mesh: left out of means
 
 
 def test_topology_counts_pieces_and_finds_holes():
@@ -97,6 +97,13 @@ def test_topology_counts_pieces_and_finds_holes():
     box = trimesh.creation.box(extents=(0.2, 0.2, 0.2))
     corner_to_corner = trimesh.util.concatenate([box, box.copy().apply_translation((0.2, 0.2, 0.2))])
     assert metrics.topology(corner_to_corner) == {"closed": True, "components": 2}  # one shared vertex, no edge
+    edge_to_edge = trimesh.util.concatenate([box, box.copy().apply_translation((0.2, 0.2, 0))])
+    assert metrics.topology(edge_to_edge) == {"closed": False, "components": 1}  # a 4-face edge joins them
+    doubled = trimesh.Trimesh(box.vertices, np.vstack([box.faces, box.faces[:1]]), process=False)
+    assert metrics.topology(doubled) == {"closed": False, "components": 1}  # its 3-face edges join the copy
+    sliver = trimesh.Trimesh(box.vertices, np.vstack([box.faces, [[0, 0, 1]]]), process=False)
+    assert metrics.topology(sliver) == {"closed": True, "components": 1}  # a repeated-vertex face is dropped
+    assert metrics.topology(trimesh.Trimesh(box.vertices, [[0, 0, 1]], process=False))["components"] == 0
     holed = trimesh.Trimesh(sphere.vertices, sphere.faces[1:], process=False)
     assert metrics.topology(holed) == {"closed": False, "components": 1}
     # a triangle soup (every face its own three vertices) is the same closed surface once merged

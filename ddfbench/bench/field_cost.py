@@ -40,7 +40,7 @@ def flops_per_point(net: nn.Module, in_dim: int = 3) -> int:
     hooks = [m.register_forward_hook(count) for m in net.modules() if isinstance(m, (nn.Linear, nn.Conv1d))]
     try:
         with torch.no_grad():
-            net(torch.zeros(1, in_dim))
+            net(torch.zeros(1, in_dim, device=next(net.parameters()).device))
     finally:
         for h in hooks:
             h.remove()
