@@ -57,6 +57,7 @@ def test_report_writes_the_band_plot_and_the_time_to_floor_table(tmp_path):
     table = (out / "time_to_floor.md").read_text()
     assert "| neural_sdf | bone | 3 |" in table and "time to 2× floor" in table
     assert "Time to reach the noise floor" in (out / "report.md").read_text()
+    assert "| neural_sdf | bone | 3 | 0 of 3 |" in (out / "stability.md").read_text()
 
 
 @pytest.mark.slow  # expands the sweep (~0.2 s a job)
@@ -90,3 +91,22 @@ def test_paper_ddf_is_both_paper_presets_on_every_shape_at_ten_minutes():
     with initialize_config_dir(CONF_DIR, version_base="1.3"):
         train = compose("config", overrides=["+experiment=paper_ddf"]).train
     assert (train.budget, train.max_seconds) == ("wall-clock", 600)  # labelled: "does it train in 10 minutes"
+
+
+def test_stability_counts_each_way_a_run_diverges_and_not_other_failures():
+    steady = [(1, 1e-3), (10, 2e-4), (100, 1e-4)]
+    recs = [run("gan_sdf", "bunny", 0, steady),
+            run("gan_sdf", "bunny", 1, [(1, 1e-3), (10, 1e-4), (100, 2.5e-4)]),  # last 2.5x its best: regressed
+            run("gan_sdf", "bunny", 2, [(1, 1e-3), (10, 1e-4), (100, 1.9e-4)]),  # 1.9x: within the margin
+            {**run("gan_sdf", "bunny", 3, steady), "status": "failed", "fit": {"stop": "nonfinite"}},
+            {**run("gan_sdf", "bunny", 4, steady), "status": "failed", "fit": {"stop": "max_steps"}},
+            run("gan_sdf", "bunny", 5, steady), run("ddf", "bunny", 0, steady)]
+    recs[5]["metrics"]["empty_reconstruction"] = True
+    rows = {r["model"]: r for r in convergence.stability_rows(recs)}
+    gan = rows["gan_sdf"]
+    assert (gan["runs"], gan["nonfinite"], gan["failed_other"], gan["empty"], gan["regressed"]) == (6, 1, 1, 1, 1)
+    assert gan["diverged"] == 3 and gan["worst_ratio"] == pytest.approx(2.5)
+    assert rows["ddf"]["diverged"] == 0 and rows["ddf"]["worst_ratio"] == 1
+    md = convergence.stability_markdown(list(rows.values()))
+    assert "| gan_sdf | bunny | 6 | 3 of 6 | 1 | 1 | 1 | 2.5 | 1 |" in md
+    assert "| ddf | bunny | 1 | 0 of 1 | 0 | 0 | 0 | 1 | 0 |" in md

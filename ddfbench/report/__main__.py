@@ -7,6 +7,7 @@ Writes, from the run records below the folder:
   report.md                        the note, the sweep's status (runs done / failed / missing), the
                                    table, the plots, and every record key the table was built from
   time_to_floor.md, .csv           convergence: time to reach 2x and 5x the noise floor (report.convergence)
+  stability.md, .csv               convergence: how many runs diverged (non-finite, empty mesh, regressed)
   paired.md                        ablation and sampling: paired differences against the baseline setting
                                    on the same seeds (ddfbench.report.paired)
 A report comes from one code commit: records from several commits are refused (exit 2) unless
@@ -119,6 +120,11 @@ def write_report(records_dir: str, out_dir: str, note: str | None = None,
         with open(os.path.join(out_dir, "time_to_floor.md"), "w") as fh:
             fh.write(extra[-1])
         pd.DataFrame(rows).to_csv(os.path.join(out_dir, "time_to_floor.csv"), index=False)
+        stable = convergence.stability_rows(records)
+        extra.append("## Stability: how many runs diverged\n\n" + convergence.stability_markdown(stable))
+        with open(os.path.join(out_dir, "stability.md"), "w") as fh:
+            fh.write(extra[-1])
+        pd.DataFrame(stable).to_csv(os.path.join(out_dir, "stability.csv"), index=False)
     lines = [f"# {experiment}", ""]
     if note:
         lines += [f"**{note}**", ""]

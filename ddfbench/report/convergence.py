@@ -1,5 +1,5 @@
 """Convergence over a long fit: probe curves per seed, their median and min–max band, time to reach
-k × the noise floor (`+experiment=convergence`).
+k × the noise floor, and how many runs diverged (`+experiment=convergence`, `paper_ddf`, `gan_epochs`).
 
 A run's curve is its accuracy probes (record fit.probes: seconds of training, chamfer_l2, fscore@r).
 Between probes a curve holds its last value (a step function: nothing is interpolated that was not
@@ -18,6 +18,7 @@ from ddfbench.report.records import Record, ok_records, shape_name
 
 FLOOR_MULTIPLES = (5.0, 2.0)  # time-to-reach k x the chamfer noise floor
 NOT_REACHED = "not reached"
+REGRESSION = 2.0  # a run regressed when its last probe's chamfer L2 is over this multiple of its best probe's
 
 
 def curve(rec: Record, metric: str) -> tuple[np.ndarray, np.ndarray]:
@@ -96,4 +97,47 @@ def to_markdown(rows: list[dict[str, Any]]) -> str:
     lines += ["", "Seconds of training (probes excluded) at the first probe whose chamfer L2 is at most k × the "
               "noise floor; median over seeds, (reached/seeds); 'not reached' where fewer than half the seeds got "
               "there within the budget. Probes are log-spaced, so a time is the probe's, an upper bound."]
+    return "\n".join(lines) + "\n"
+
+
+def stability_rows(records: list[Record]) -> list[dict[str, Any]]:
+    """Per (model, shape), over every run (failed ones included): runs; nonfinite (the fit stopped on a
+    non-finite loss or weight: record fit.stop "nonfinite"); failed_other (failed for another reason: not a
+    divergence); empty (an ok run whose final mesh is empty); regressed (an ok run whose last probe's
+    chamfer L2 is over REGRESSION x its best probe's); diverged (runs with any of nonfinite, empty,
+    regressed); worst_ratio (the largest last/best probe chamfer over the ok runs with probes, NaN if none)."""
+    rows: dict[tuple[str, str], dict[str, Any]] = {}
+    for r in records:
+        row = rows.setdefault((str(r.get("model")), shape_name(r)), {
+            "model": str(r.get("model")), "shape": shape_name(r), "runs": 0, "nonfinite": 0, "failed_other": 0,
+            "empty": 0, "regressed": 0, "diverged": 0, "worst_ratio": math.nan})
+        row["runs"] += 1
+        if r.get("status") != "ok":
+            nonfinite = (r.get("fit") or {}).get("stop") == "nonfinite"
+            row["nonfinite" if nonfinite else "failed_other"] += 1
+            row["diverged"] += nonfinite
+            continue
+        empty = bool((r.get("metrics") or {}).get("empty_reconstruction"))
+        _, v = curve(r, "chamfer_l2")
+        ratio = float(v[-1] / v.min()) if len(v) and v.min() > 0 else math.nan
+        regressed = ratio > REGRESSION
+        row["worst_ratio"] = float(np.fmax(row["worst_ratio"], ratio))  # fmax skips a NaN side
+        row["empty"] += empty
+        row["regressed"] += regressed
+        row["diverged"] += empty or regressed
+    return list(rows.values())
+
+
+def stability_markdown(rows: list[dict[str, Any]]) -> str:
+    """The divergence table."""
+    lines = ["| model | shape | runs | diverged | stopped non-finite | empty mesh | regressed | worst last/best probe "
+             "| failed otherwise |", "|---" * 9 + "|"]
+    for r in rows:
+        ratio = f"{r['worst_ratio']:.3g}" if math.isfinite(r["worst_ratio"]) else "–"
+        lines.append(f"| {r['model']} | {r['shape']} | {r['runs']} | {r['diverged']} of {r['runs']} | {r['nonfinite']} "
+                     f"| {r['empty']} | {r['regressed']} | {ratio} | {r['failed_other']} |")
+    lines += ["", f"A run diverged when its fit stopped on a non-finite loss or weight, its final mesh is empty, or "
+              f"it regressed: its last probe's chamfer L2 is over {REGRESSION:g}× its best probe's (worst last/best: "
+              "the largest such ratio over the finished runs; 1 means the last probe was the best). A run that "
+              "failed for another reason (an input or disk error) is not counted as a divergence."]
     return "\n".join(lines) + "\n"
