@@ -138,6 +138,8 @@ def stability_markdown(rows: list[dict[str, Any]]) -> str:
                      f"| {r['empty']} | {r['regressed']} | {ratio} | {r['failed_other']} |")
     lines += ["", f"A run diverged when its fit stopped on a non-finite loss or weight, its final mesh is empty, or "
               f"it regressed: its last probe's chamfer L2 is over {REGRESSION:g}× its best probe's (worst last/best: "
-              "the largest such ratio over the finished runs; 1 means the last probe was the best). A run that "
-              "failed for another reason (an input or disk error) is not counted as a divergence."]
+              "the largest such ratio over the finished runs; 1 means the last probe was the best; an empty probe "
+              "mesh scores the chamfer penalty). A run that failed for another reason (input, disk, extraction or "
+              "metrics) is not counted as a divergence. runs: the records found; a sweep's missing runs are "
+              "listed in report.md's status."]
     return "\n".join(lines) + "\n"
