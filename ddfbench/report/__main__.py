@@ -87,6 +87,15 @@ def information_lines(records: list[dict[str, Any]]) -> list[str]:
                                                        for source, models in sorted(by_source.items())]
 
 
+def _write_section(out_dir: str, name: str, title: str, rows: list[dict[str, Any]], markdown: str) -> str:
+    """Write <name>.md (the titled markdown table) and <name>.csv (its rows) into out_dir; return the markdown."""
+    text = f"## {title}\n\n" + markdown
+    with open(os.path.join(out_dir, f"{name}.md"), "w") as fh:
+        fh.write(text)
+    pd.DataFrame(rows).to_csv(os.path.join(out_dir, f"{name}.csv"), index=False)
+    return text
+
+
 def write_report(records_dir: str, out_dir: str, note: str | None = None,
                  kinds: tuple[str, ...] | None = None, sweep: list[str] | None = None,
                  allow_mixed_commits: bool = False) -> str:
@@ -116,15 +125,11 @@ def write_report(records_dir: str, out_dir: str, note: str | None = None,
     extra = [pairs] if pairs is not None else []
     if experiment in ("convergence", "paper_ddf", "gan_epochs"):
         rows = convergence.time_to_floor_rows(records)
-        extra.append("## Time to reach the noise floor\n\n" + convergence.to_markdown(rows))
-        with open(os.path.join(out_dir, "time_to_floor.md"), "w") as fh:
-            fh.write(extra[-1])
-        pd.DataFrame(rows).to_csv(os.path.join(out_dir, "time_to_floor.csv"), index=False)
-        stable = convergence.stability_rows(records)
-        extra.append("## Stability: how many runs diverged\n\n" + convergence.stability_markdown(stable))
-        with open(os.path.join(out_dir, "stability.md"), "w") as fh:
-            fh.write(extra[-1])
-        pd.DataFrame(stable).to_csv(os.path.join(out_dir, "stability.csv"), index=False)
+        extra.append(_write_section(out_dir, "time_to_floor", "Time to reach the noise floor", rows,
+                                    convergence.to_markdown(rows)))
+        rows = convergence.stability_rows(records)
+        extra.append(_write_section(out_dir, "stability", "Stability: how many runs diverged", rows,
+                                    convergence.stability_markdown(rows)))
     lines = [f"# {experiment}", ""]
     if note:
         lines += [f"**{note}**", ""]
