@@ -131,20 +131,25 @@ def test_side_by_side_interleaves_figure_and_reference():
     assert all(len(t.runs_s) == 3 for _, t in timed.values())
 
 
-def test_render_time_row_times_the_first_render_apart_from_the_later_ones(monkeypatch):
+def test_render_time_interleaves_representations_and_times_the_first_render_apart(monkeypatch):
     calls = []
 
     def fake_render(rep, scene, passes, seed):
-        calls.append(seed)
-        time.sleep(0.001)
-        return None, {"primary_rays": 10, "shadow_rays": 5, "bounce_rays": 1}
+        calls.append(rep)
+        time.sleep(0.03 if rep == "slow" else 0.001)
+        return None, {"primary_rays": 10, "shadow_rays": 5, "bounce_rays": 1, "field_evals": 40 if rep == "slow" else 0}
 
     monkeypatch.setattr(render_time, "render", fake_render)
     monkeypatch.setattr(render_time, "plan_passes", lambda scene: [])
-    row = render_time._row("fake", 0.5, rep=None, scene=None, renders=4)
-    assert len(calls) == 4 and len(row["seconds"]) == 4  # no untimed warm-up: every render is in the row
-    assert row["render_1_s"] == row["seconds"][0] and row["later_median_s"] == sorted(row["seconds"][1:])[1]
-    assert row["rays"] == 16 and row["rays_per_s"] == pytest.approx(16 / row["later_median_s"])
+    rows = render_time._rows([("fast", 0.5, "fast"), ("slow", 0.7, "slow")], scene=None, renders=4)
+    # both cold renders first, then rounds of one render each with the order rotated: neither always goes first
+    assert calls == ["fast", "slow", "fast", "slow", "slow", "fast", "fast", "slow"]
+    fast, slow = rows
+    assert len(fast["seconds"]) == 4  # no untimed warm-up: every render is in the row
+    assert fast["render_1_s"] == fast["seconds"][0] and fast["later_median_s"] == sorted(fast["seconds"][1:])[1]
+    assert fast["rays"] == 16 and fast["rays_per_s"] == pytest.approx(16 / fast["later_median_s"])
+    assert (fast["field_evals"], slow["field_evals"], slow["setup_s"]) == (0, 40, 0.7)
+    assert slow["later_median_s"] > fast["later_median_s"]
 
 
 def test_precision_context_switches_autocast_and_rejects_unknown():

@@ -5,10 +5,15 @@ the same scene, per representation, against the full mesh's BVH measured in the 
     python -m ddfbench.bench.render_time --scene paper_fig4 --size 128 --renders 8 --plot fig5.png
     python -m ddfbench.bench.render_time --model ddf=results/single/<key>/model.pt   a saved artifact of any family
 
+Renders are interleaved (ddfbench.bench.timing.measure_side_by_side): each representation's first
+render in turn, then rounds of one render each, the order rotated, so every row sees the same machine
+load and the ratios between rows hold on a busy machine even where the seconds drift.
+
 Columns: setup_s (build or load: mesh decimation + scene, or Family.load), render_1_s (the cold
 render: lazy setup such as the BVH commit or weights to the device included), later_median_s and
 later_iqr_s (renders 2..N), rays_per_s (primary + shadow + bounce rays of one render / later median),
-vs_bvh (the full mesh's later median / this one's: above 1 is faster than the BVH).
+field_evals (field evaluations of one render, as counted by the renderer: 0 for the mesh), vs_bvh
+(the full mesh's later median / this one's: above 1 is faster than the BVH).
 """
 
 from __future__ import annotations
@@ -22,11 +27,12 @@ from hydra import compose, initialize_config_dir
 from omegaconf import OmegaConf
 
 from ddfbench import CONF_DIR
+from ddfbench.bench.timing import measure_side_by_side
 from ddfbench.models import load_family
 from ddfbench.oracle import Oracle
 from ddfbench.render.integrator import render
 from ddfbench.render.scene import parse_scene, plan_passes
-from ddfbench.render.timing import clock, compute_threads, time_renders
+from ddfbench.render.timing import clock, compute_threads
 from ddfbench.representation import Budget, FitData, Representation
 from ddfbench.shapes import load_shape
 
@@ -42,14 +48,20 @@ def _mesh_rep(shape, faces: int) -> Representation:
     return rep
 
 
-def _row(name: str, setup_s: float, rep: Representation, scene, renders: int) -> dict:
-    """One table row: `renders` renders of the scene, the first cold, no untimed warm-up (seconds)."""
+def _rows(reps: list[tuple[str, float, Representation]], scene, renders: int) -> list[dict]:
+    """A table row per (name, setup seconds, representation): `renders` renders each, interleaved (module
+    docstring), the first cold, no untimed warm-up (seconds)."""
     passes = plan_passes(scene)
-    (_, counts), timing = time_renders(lambda: render(rep, scene, passes, seed=0), repeats=renders - 1, warmup=0)
-    rays = counts["primary_rays"] + counts["shadow_rays"] + counts["bounce_rays"]
-    return {"name": name, "setup_s": setup_s, "render_1_s": timing.cold_s, "later_median_s": timing.warm_s,
-            "later_iqr_s": timing.warm_iqr_s, "rays": rays, "rays_per_s": rays / timing.warm_s,
-            "seconds": [timing.cold_s, *timing.warm_all_s]}
+    fns = {name: (lambda rep=rep: render(rep, scene, passes, seed=0)) for name, _, rep in reps}
+    timed = measure_side_by_side(fns, repeats=renders - 1, warmup=0)
+    rows = []
+    for name, setup_s, _ in reps:
+        (_, counts), timing = timed[name]
+        rays = counts["primary_rays"] + counts["shadow_rays"] + counts["bounce_rays"]
+        rows.append({"name": name, "setup_s": setup_s, "render_1_s": timing.cold_s, "later_median_s": timing.median_s,
+                     "later_iqr_s": timing.iqr_s, "rays": rays, "rays_per_s": rays / timing.median_s,
+                     "field_evals": int(counts.get("field_evals", 0)), "seconds": [timing.cold_s, *timing.runs_s]})
+    return rows
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -67,25 +79,29 @@ def main(argv: list[str] | None = None) -> None:
 
     shape = load_shape(_config("shape", args.shape))
     scene = parse_scene({**_config("scene", args.scene), "width": args.size, "height": args.size})
-    rows = []
+    reps = []
     for faces in [0] + [int(f) for f in args.lods.split(",") if f.strip()]:
         start = time.perf_counter()
         rep = _mesh_rep(shape, faces)
-        rows.append(_row(f"mesh faces={len(rep.mesh.faces)}", time.perf_counter() - start, rep, scene, args.renders))
+        reps.append((f"mesh faces={len(rep.mesh.faces)}", time.perf_counter() - start, rep))
     for spec in args.model:
         family, _, path = spec.partition("=")
         start = clock()
         rep = load_family(family).load(path)
-        rows.append(_row(f"{family} {os.path.basename(path)}", clock() - start, rep, scene, args.renders))
+        reps.append((f"{family} {os.path.join(*os.path.normpath(path).split(os.sep)[-2:])}", clock() - start, rep))
+    if len({name for name, _, _ in reps}) < len(reps):
+        ap.error("two --model artifacts share a family and a folder name; give each its own run folder")
+    rows = _rows(reps, scene, args.renders)
 
     bvh = rows[0]["later_median_s"]
     print(f"shape={args.shape} scene={args.scene} {args.size}x{args.size} cameras={len(scene.cameras)} "
           f"spp={scene.spp} renders={args.renders} threads={compute_threads()}")
-    print("| representation | setup_s | render_1_s | later_median_s | later_iqr_s | rays | rays_per_s | vs_bvh |")
-    print("|---|---|---|---|---|---|---|---|")
+    print("| representation | setup_s | render_1_s | later_median_s | later_iqr_s | rays | rays_per_s | field_evals | vs_bvh |")
+    print("|---|---|---|---|---|---|---|---|---|")
     for r in rows:
         print(f"| {r['name']} | {r['setup_s']:.4f} | {r['render_1_s']:.4f} | {r['later_median_s']:.4f} | "
-              f"{r['later_iqr_s']:.4f} | {r['rays']} | {r['rays_per_s']:.3g} | {bvh / r['later_median_s']:.2f} |")
+              f"{r['later_iqr_s']:.4f} | {r['rays']} | {r['rays_per_s']:.3g} | {r['field_evals']} | "
+              f"{bvh / r['later_median_s']:.2f} |")
     if args.plot:
         import matplotlib
 
