@@ -152,6 +152,18 @@ def test_render_time_interleaves_representations_and_times_the_first_render_apar
     assert slow["later_median_s"] > fast["later_median_s"]
 
 
+def test_render_time_command_renders_a_too_large_lod_once_and_refuses_two_models_named_alike(capsys):
+    # the cube has 12 faces: every default LOD target (10000, 2000, 500) is the full mesh again
+    render_time.main(["--shape", "cube", "--size", "8", "--renders", "2"])
+    out = capsys.readouterr()
+    rows = [line for line in out.out.splitlines() if line.startswith("| mesh")]
+    assert rows == [r for r in rows if "faces=12 |" in r] and len(rows) == 1
+    assert "as many faces as an earlier row" in out.err
+    with pytest.raises(SystemExit):
+        render_time.main(["--shape", "cube", "--model", "ddf=a/run/model.pt", "--model", "ddf=b/run/model.pt"])
+    assert "share a family and a run folder name" in capsys.readouterr().err
+
+
 def test_precision_context_switches_autocast_and_rejects_unknown():
     a = torch.ones(4, 4)
     with precision_context("bf16", "cpu"):

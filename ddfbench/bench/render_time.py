@@ -7,7 +7,9 @@ the same scene, per representation, against the full mesh's BVH measured in the 
 
 Renders are interleaved (ddfbench.bench.timing.measure_side_by_side): each representation's first
 render in turn, then rounds of one render each, the order rotated, so every row sees the same machine
-load and the ratios between rows hold on a busy machine even where the seconds drift.
+load and the ratios between rows hold on a busy machine even where the seconds drift. The price: a
+fast representation rendered right after a slow one starts with caches the slow one filled, so a
+10 ms mesh frame beside a 20 s network frame reads a little slower than alone.
 
 Columns: setup_s (build or load: mesh decimation + scene, or Family.load), render_1_s (the cold
 render: lazy setup such as the BVH commit or weights to the device included), later_median_s and
@@ -79,18 +81,23 @@ def main(argv: list[str] | None = None) -> None:
 
     shape = load_shape(_config("shape", args.shape))
     scene = parse_scene({**_config("scene", args.scene), "width": args.size, "height": args.size})
+    models = [(family, path, f"{family} {os.path.join(*os.path.normpath(path).split(os.sep)[-2:])}")
+              for family, _, path in (spec.partition("=") for spec in args.model)]
+    if len({name for _, _, name in models}) < len(models):
+        ap.error("--model: two artifacts share a family and a run folder name; give each its own folder")
     reps = []
     for faces in [0] + [int(f) for f in args.lods.split(",") if f.strip()]:
         start = time.perf_counter()
         rep = _mesh_rep(shape, faces)
-        reps.append((f"mesh faces={len(rep.mesh.faces)}", time.perf_counter() - start, rep))
-    for spec in args.model:
-        family, _, path = spec.partition("=")
+        name = f"mesh faces={len(rep.mesh.faces)}"
+        if name in {n for n, _, _ in reps}:  # a LOD at or above the mesh's face count is the mesh itself
+            print(f"--lods {faces}: as many faces as an earlier row ({name}), so not rendered again", file=sys.stderr)
+            continue
+        reps.append((name, time.perf_counter() - start, rep))
+    for family, path, name in models:
         start = clock()
         rep = load_family(family).load(path)
-        reps.append((f"{family} {os.path.join(*os.path.normpath(path).split(os.sep)[-2:])}", clock() - start, rep))
-    if len({name for name, _, _ in reps}) < len(reps):
-        ap.error("two --model artifacts share a family and a folder name; give each its own run folder")
+        reps.append((name, clock() - start, rep))
     rows = _rows(reps, scene, args.renders)
 
     bvh = rows[0]["later_median_s"]
