@@ -297,6 +297,28 @@ def test_equal_values_are_not_marked_and_empty_reconstructions_are_counted():
     assert "**" not in md.split("\n\n")[0] and "1 (1 empty)" in md and "defined penalty" in md
 
 
+def test_a_fit_that_never_found_the_shape_is_counted_and_a_row_of_them_is_not_converged():
+    def run(model, seed, widest_f):
+        rec = make_record(model=model, seed=seed, chamfer=0.2 if widest_f == 0 else 2e-3)
+        rec["metrics"]["fscore"] = {"0.01": widest_f / 2, "0.02": widest_f}
+        return rec
+
+    # a closed blob away from the shape: a mesh, measured, but F@0.02 = 0
+    mixed = [run("gan_sdf", 0, 0.57), run("gan_sdf", 1, 0.58), run("gan_sdf", 2, 0.0)]
+    lost = [run("gan_lost", s, 0.0) for s in (0, 1, 2)]
+    near = [run("gan_near", s, f) for s, f in ((0, 1e-3), (1, 0.6), (2, 0.5))]  # a few points near: not off the shape
+    unjudged = make_record(model="mesh_lod500")  # no F@0.02 in the record: not judged
+    df = tables.summarize(mixed + lost + near + [unjudged]).set_index("model")
+    assert (df.loc["gan_sdf", "n_off"], df.loc["gan_lost", "n_off"], df.loc["gan_near", "n_off"]) == (1, 3, 0)
+    assert df.loc["mesh_lod500", "n_off"] == 0
+    assert df.loc["gan_lost", "not_converged"] and not df.loc["gan_sdf", "not_converged"]
+    assert df.loc["gan_sdf", "chamfer_l2_mean"] == pytest.approx((2e-3 + 2e-3 + 0.2) / 3)  # measured: kept in the mean
+    md = tables.to_markdown(tables.summarize(mixed + lost + near + [unjudged]))
+    assert "3 (1 off the shape)" in next(line for line in md.splitlines() if line.startswith("| gan_sdf"))
+    assert "3 (3 off the shape) not converged" in next(line for line in md.splitlines() if line.startswith("| gan_lost"))
+    assert "(k off the shape): k runs gave a surface with F@0.02 = 0" in md
+
+
 def test_a_value_defined_in_fewer_runs_than_n_says_over_how_many():
     recs = [make_record(seed=s, chamfer=1e-3 * (1 + s)) for s in range(3)]
     for r, mae in zip(recs, (2e-3, 4e-3, None)):  # the third render hit no pixel the reference hit

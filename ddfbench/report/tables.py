@@ -29,7 +29,17 @@ FLOOR_MODEL = "noise floor"  # the `model` cell of a noise-floor row
 SEED_KEYS = ("seed",)
 INCOMPLETE = "†"  # marks a row with fewer ok runs than the fullest row
 TIE = "≈"  # marks values whose interval overlaps the best one's
-NOT_CONVERGED = "not converged"  # the n cell of a row whose every reconstruction was empty
+NOT_CONVERGED = "not converged"  # the n cell of a row whose every reconstruction was empty or off the shape
+WIDEST_F = f"fscore@{max(metric_registry.FSCORE_RADII)}"  # 0 there: no point of either surface near the other
+
+
+def off_shape(rec: dict[str, Any]) -> bool:
+    """Whether a run's reconstruction is not empty but shares no surface with the ground truth: its F-score at
+    the widest radius is 0 (no sampled point of either surface within that distance of the other), as for a
+    fit that never found the shape. A record without that F-score is not judged (False)."""
+    m = rec.get("metrics") or {}
+    f = metric_registry.by_name()[WIDEST_F].read(rec)
+    return not m.get("empty_reconstruction") and math.isfinite(f) and f == 0.0
 
 
 def _metrics() -> dict[str, metric_registry.Metric]:
@@ -74,7 +84,7 @@ def record_row(rec: dict[str, Any]) -> dict[str, Any]:
         "key": rec.get("key"), "status": rec.get("status"), "error": rec.get("error"),
         "experiment": rec.get("experiment"), "model": rec.get("model"), "family": rec.get("family"),
         "shape": (rec.get("shape") or {}).get("name"), "seed": (rec.get("config") or {}).get("seed"),
-        "empty": bool(m.get("empty_reconstruction")), "started": str(rec.get("started") or ""),
+        "empty": bool(m.get("empty_reconstruction")), "off": off_shape(rec), "started": str(rec.get("started") or ""),
         "budget": budget_label(rec),
     }
     for metric in metric_registry.METRICS:
@@ -121,7 +131,8 @@ def summarize(records: Iterable[dict[str, Any]]) -> pd.DataFrame:
 
     Columns: model, shape, one per varying override key (its value, None where a record lacks it),
     budget (steps | epochs | wall-clock), n (ok runs), n_failed, n_expected (runs of the fullest row), n_empty (ok runs whose reconstruction
-    was empty: their metrics are the defined penalty), errors, keys (record hashes),
+    was empty: their metrics are the defined penalty), n_off (ok runs off the shape, `off_shape`), not_converged
+    (every ok run empty or off the shape: not a method result, not ranked), errors, keys (record hashes),
     <metric>_mean, <metric>_std, <metric>_ci_lo, <metric>_ci_hi (t interval over seeds),
     noise_floor_<metric>_mean.
     """
@@ -156,7 +167,8 @@ def summarize(records: Iterable[dict[str, Any]]) -> pd.DataFrame:
         entry["n_failed"] = len(members) - len(ok)
         entry["n_expected"] = n_expected
         entry["n_empty"] = sum(m["empty"] for m in ok)
-        entry["not_converged"] = bool(ok) and entry["n_empty"] == len(ok)  # nothing to rank: every mesh empty
+        entry["n_off"] = sum(m["off"] for m in ok)
+        entry["not_converged"] = bool(ok) and entry["n_empty"] + entry["n_off"] == len(ok)  # nothing to rank
         entry["errors"] = "; ".join(sorted({m["error"] for m in members if m["error"]}))
         entry["keys"] = " ".join(sorted(m["key"] for m in members))
         for name in _metrics():
@@ -244,6 +256,7 @@ def _n_cell(row: pd.Series) -> str:
         text = f"{row['n']}/{row['n_expected']}{INCOMPLETE}"
     text += f" ({row['n_failed']} failed)" if row["n_failed"] else ""
     text += f" ({row['n_empty']} empty)" if row.get("n_empty") else ""
+    text += f" ({row['n_off']} off the shape)" if row.get("n_off") else ""
     return text + (f" {NOT_CONVERGED}" if row.get("not_converged") else "")
 
 
@@ -258,7 +271,7 @@ def _cells(df: pd.DataFrame, bold: tuple[str, str]) -> tuple[list[str], list[lis
                  for c in labels] + [_n_cell(row)]
         for m in metrics:
             if row.get("not_converged") and registry[m].penalty is not None:
-                cells.append("–")  # a penalty, not a measurement (table.csv keeps it)
+                cells.append("–")  # a penalty or a fit that never found the shape: no method result (table.csv keeps it)
                 continue
             text = _fmt(row[f"{m}_mean"], row[f"{m}_std"], registry[m].scale) + _defined_in(row, m)
             cells.append(f"{bold[0]}{text}{bold[1]}" if mark[m][i] == "best" else
@@ -284,13 +297,16 @@ def _footnotes(df: pd.DataFrame) -> list[str]:
         lines.append(f"{INCOMPLETE} fewer ok runs than the fullest row: its mean is over the ok runs only.")
     if "n_empty" in df and (df["n_empty"] > 0).any():
         lines.append("(k empty): k runs gave an empty reconstruction; their geometry metrics are the defined penalty.")
+    if "n_off" in df and (df["n_off"] > 0).any():
+        lines.append(f"(k off the shape): k runs gave a surface with {WIDEST_F.replace('fscore', 'F')} = 0 (no sampled point of "
+                     "either surface near the other: the fit never found the shape); their measured metrics stay in the mean.")
     if _partial_metrics(df):
         lines.append("(of k): the value is defined in k of the row's n runs (a depth error needs pixels that both "
                      "the render and the reference hit); its mean, std and interval are over those k.")
     if "not_converged" in df and df["not_converged"].astype(bool).any():
-        lines.append(f"{NOT_CONVERGED}: every run's reconstruction was empty, so the row is not a method result: its "
-                     "geometry cells are blank (table.csv keeps the penalty), it is not ranked, and its steps and "
-                     "epochs columns say how much it was trained.")
+        lines.append(f"{NOT_CONVERGED}: every run's reconstruction was empty or off the shape, so the row is not a method "
+                     "result: its geometry cells are blank (table.csv keeps the values), it is not ranked, and its steps "
+                     "and epochs columns say how much it was trained.")
     for _, row in df[df["n_failed"] > 0].iterrows():
         lines.append(f"Failed ({row['model']}, {row['shape']}): {row['errors']}")
     return lines
