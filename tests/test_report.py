@@ -317,6 +317,7 @@ def test_a_fit_that_never_found_the_shape_is_counted_and_a_row_of_them_is_not_co
     assert "3 (1 off the shape)" in next(line for line in md.splitlines() if line.startswith("| gan_sdf"))
     assert "3 (3 off the shape) not converged" in next(line for line in md.splitlines() if line.startswith("| gan_lost"))
     assert "(k off the shape): k runs gave a surface with F@0.02 = 0" in md
+    assert md.splitlines()[0].startswith("| model | shape | budget | n | CD-L2")  # a count, not a label column
 
 
 def test_a_value_defined_in_fewer_runs_than_n_says_over_how_many():

@@ -218,7 +218,7 @@ def _shown_metrics(df: pd.DataFrame) -> list[str]:
 
 
 def _label_columns(df: pd.DataFrame) -> list[str]:
-    hidden = {"n", "n_failed", "n_expected", "n_empty", "not_converged", "errors", "keys"} | {f"{m}_n" for m in _metrics()}
+    hidden = {"n", "n_failed", "n_expected", "n_empty", "n_off", "not_converged", "errors", "keys"} | {f"{m}_n" for m in _metrics()}
     return [c for c in df.columns if not c.endswith(("_mean", "_std", "_ci_lo", "_ci_hi")) and c not in hidden]
 
 
