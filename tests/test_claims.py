@@ -106,6 +106,9 @@ def test_every_claim_has_a_row_with_a_verdict():
     ({"paper_ddf": [{**rec("paper_ddf", "ddf_paper", s, 8.64, family="ddf"), "fit": {"steps": 292},
                      "metrics": {"chamfer_l2": 8.64, "empty_reconstruction": True, "n_points": 2000}} for s in SEEDS]},
      "ddf_paper: bunny chamfer at most the paper's 0.589×10³", claims.NO_RECORDS, claims.NOT_CONVERGED),
+    ({"paper_ddf": [{**rec("paper_ddf", "ddf_paper", s, 0.2, family="ddf"), "fit": {"steps": 292},  # a blob off the shape
+                     "metrics": {"chamfer_l2": 0.2, "fscore": {"0.02": 0.0}, "n_points": 2000}} for s in SEEDS]},
+     "ddf_paper: bunny chamfer at most the paper's 0.589×10³", claims.NO_RECORDS, claims.NOT_CONVERGED),
     ({"representations": representations(1.05)}, "DDF as accurate as the neural SDF", claims.REFUTED,
      claims.CONFIRMED),
     ({"render_time": render_time("cuda")}, f"DDF renders faster than {claims.SDF}", claims.NOT_TESTABLE, claims.CONFIRMED),

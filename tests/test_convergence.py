@@ -102,13 +102,17 @@ def test_stability_counts_each_way_a_run_diverges_and_not_other_failures():
             {**run("gan_sdf", "bunny", 4, steady), "status": "failed", "fit": {"stop": "max_steps"}},
             run("gan_sdf", "bunny", 5, steady), run("ddf", "bunny", 0, steady),
             run("gan_sdf", "bunny", 6, [(1, 1e-3), (10, 1e-4), (100, 3e-4)]),  # empty and regressed: one divergence
-            {"status": "failed", "model": "gan_sdf", "shape": {"name": "bunny"}, "error": "bad file"}]  # before any fit
+            {"status": "failed", "model": "gan_sdf", "shape": {"name": "bunny"}, "error": "bad file"},  # before any fit
+            run("gan_sdf", "bunny", 7, steady), run("gan_sdf", "bunny", 8, steady)]
     recs[5]["metrics"]["empty_reconstruction"] = recs[7]["metrics"]["empty_reconstruction"] = True
+    recs[9]["metrics"]["fscore"] = {"0.01": 0.0, "0.02": 0.0}  # a mesh nowhere near the shape: off it
+    recs[10]["metrics"]["fscore"] = {"0.01": 0.0, "0.02": 1e-3}  # a few sampled points near it: a result
     rows = {r["model"]: r for r in convergence.stability_rows(recs)}
     gan = rows["gan_sdf"]
-    assert (gan["runs"], gan["nonfinite"], gan["failed_other"], gan["empty"], gan["regressed"]) == (8, 1, 2, 2, 2)
-    assert gan["diverged"] == 4 and gan["worst_ratio"] == pytest.approx(3)
+    assert (gan["runs"], gan["nonfinite"], gan["failed_other"], gan["empty"], gan["off"], gan["regressed"]) == (
+        10, 1, 2, 2, 1, 2)
+    assert gan["diverged"] == 5 and gan["worst_ratio"] == pytest.approx(3)
     assert rows["ddf"]["diverged"] == 0 and rows["ddf"]["worst_ratio"] == 1
     md = convergence.stability_markdown(list(rows.values()))
-    assert "| gan_sdf | bunny | 8 | 4 of 8 | 1 | 2 | 2 | 3 | 2 |" in md
-    assert "| ddf | bunny | 1 | 0 of 1 | 0 | 0 | 0 | 1 | 0 |" in md
+    assert "| gan_sdf | bunny | 10 | 5 of 10 | 1 | 2 | 1 | 2 | 3 | 2 |" in md
+    assert "| ddf | bunny | 1 | 0 of 1 | 0 | 0 | 0 | 0 | 1 | 0 |" in md

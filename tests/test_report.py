@@ -308,16 +308,25 @@ def test_a_fit_that_never_found_the_shape_is_counted_and_a_row_of_them_is_not_co
     lost = [run("gan_lost", s, 0.0) for s in (0, 1, 2)]
     near = [run("gan_near", s, f) for s, f in ((0, 1e-3), (1, 0.6), (2, 0.5))]  # a few points near: not off the shape
     unjudged = make_record(model="mesh_lod500")  # no F@0.02 in the record: not judged
-    df = tables.summarize(mixed + lost + near + [unjudged]).set_index("model")
+    both = [run("gan_both", s, 0.0) for s in (0, 1, 2)]
+    both[0]["metrics"]["empty_reconstruction"] = True  # one empty and two off the shape: no result either
+    df = tables.summarize(mixed + lost + near + both + [unjudged]).set_index("model")
+    assert df.loc["gan_both", "not_converged"] and (df.loc["gan_both", "n_empty"], df.loc["gan_both", "n_off"]) == (1, 2)
     assert (df.loc["gan_sdf", "n_off"], df.loc["gan_lost", "n_off"], df.loc["gan_near", "n_off"]) == (1, 3, 0)
     assert df.loc["mesh_lod500", "n_off"] == 0
     assert df.loc["gan_lost", "not_converged"] and not df.loc["gan_sdf", "not_converged"]
     assert df.loc["gan_sdf", "chamfer_l2_mean"] == pytest.approx((2e-3 + 2e-3 + 0.2) / 3)  # measured: kept in the mean
-    md = tables.to_markdown(tables.summarize(mixed + lost + near + [unjudged]))
+    summary = tables.summarize(mixed + lost + near + both + [unjudged])
+    assert tables.marks(summary, "chamfer_l2")[summary["model"].isin(["gan_lost", "gan_both"])].eq("").all()
+    md = tables.to_markdown(summary)
+    assert "3 (1 empty) (2 off the shape) not converged | – |" in md
     assert "3 (1 off the shape)" in next(line for line in md.splitlines() if line.startswith("| gan_sdf"))
     assert "3 (3 off the shape) not converged" in next(line for line in md.splitlines() if line.startswith("| gan_lost"))
     assert "(k off the shape): k runs gave a surface with F@0.02 = 0" in md
     assert md.splitlines()[0].startswith("| model | shape | budget | n | CD-L2")  # a count, not a label column
+    # the Pareto plot draws a row of no results as a cross, off the front, as it does an all-empty row
+    points = {p["model"]: p["empty"] for p in plots._config_points(mixed + lost + both, "fit_s")}
+    assert points == {"gan_sdf": False, "gan_lost": True, "gan_both": True}
 
 
 def test_a_value_defined_in_fewer_runs_than_n_says_over_how_many():

@@ -11,7 +11,8 @@ seeds (or over paired seeds) with n, the experiment and rows it comes from, and 
   not separable    the interval straddles the boundary at this n (or n < 2)
   not testable     ddfbench cannot test it here (the reason is given)
   no records       the experiment has not been run into this folder
-  not converged    every run gave an empty reconstruction: not a method result (steps given)
+  not converged    every run gave an empty reconstruction or one off the shape (records.off_shape): not a
+                   method result (steps given)
 
 Records can live on several machines: with --carry PREVIOUS, a claim whose experiment has no records
 below `results` keeps its row from the previous claims.md, marked † (and the header names the code of
@@ -31,7 +32,7 @@ from typing import Any, Callable
 from ddfbench.errors import InputError
 from ddfbench.metric_registry import by_name
 from ddfbench.report import matched, paired
-from ddfbench.report.records import chamfer_l2, ok_records, shape_name
+from ddfbench.report.records import chamfer_l2, empty_mesh, no_result, ok_records, shape_name
 from ddfbench.report.stats import INTERVAL_NAME, Summary, summarize_values
 from ddfbench.runs import code_commits, find_records
 
@@ -151,9 +152,10 @@ def table1_bunny(records: Records) -> list[Claim]:
             out.append(_missing(f"{model}: bunny chamfer at most the paper's 0.589×10³", src, paper, experiment))
             continue
         s = summarize_values(chamfer_l2(r) for r in mine)
-        empty = all((r.get("metrics") or {}).get("empty_reconstruction") for r in mine)
+        empty = all(no_result(r) for r in mine)
         steps = sorted({int((r.get("fit") or {}).get("steps") or 0) for r in mine})
-        measured = (f"empty mesh in all {len(mine)} runs ({'/'.join(map(str, steps))} steps)" if empty
+        what = "empty mesh" if all(empty_mesh(r) for r in mine) else "empty mesh or a surface off the shape"
+        measured = (f"{what} in all {len(mine)} runs ({'/'.join(map(str, steps))} steps)" if empty
                     else f"CD×10³ {_interval(s)}")
         out.append(Claim(f"{model}: bunny chamfer at most the paper's 0.589×10³", src, paper,
                          measured, f"`{experiment}`: {model} × bunny ({len(mine)} records)",
@@ -337,7 +339,7 @@ def to_markdown(claims: list[Claim], records: Records, source: str, carried_from
              f"(code: {', '.join(shas) or 'none'}).{carried} Intervals: {INTERVAL_NAME}, over seeds or over "
              "paired seeds as each row says. Verdicts: confirmed / refuted (the interval lies on one side), "
              "not separable at n (it straddles), not testable here (why is given), no records, not converged (every "
-             "run's mesh was empty: not a method result).", "",
+             "run's mesh was empty or off the shape: not a method result).", "",
              "| claim | source | the paper says | ddfbench measured | experiment / rows | verdict | conventions |",
              "|---|---|---|---|---|---|---|"]
     lines += ["| " + " | ".join(cell(x) for x in (c.claim, c.source, c.paper, c.measured, c.rows, f"**{c.verdict}**",

@@ -14,7 +14,7 @@ from typing import Any, Iterable
 import numpy as np
 
 from ddfbench.metric_registry import by_name
-from ddfbench.report.records import Record, ok_records, shape_name
+from ddfbench.report.records import WIDEST_F, Record, empty_mesh, off_shape, ok_records, shape_name
 
 FLOOR_MULTIPLES = (5.0, 2.0)  # time-to-reach k x the chamfer noise floor
 NOT_REACHED = "not reached"
@@ -103,41 +103,42 @@ def to_markdown(rows: list[dict[str, Any]]) -> str:
 def stability_rows(records: list[Record]) -> list[dict[str, Any]]:
     """Per (model, shape), over every run (failed ones included): runs; nonfinite (the fit stopped on a
     non-finite loss or weight: record fit.stop "nonfinite"); failed_other (failed for another reason: not a
-    divergence); empty (an ok run whose final mesh is empty); regressed (an ok run whose last probe's
-    chamfer L2 is over REGRESSION x its best probe's); diverged (runs with any of nonfinite, empty,
-    regressed); worst_ratio (the largest last/best probe chamfer over the ok runs with probes, NaN if none)."""
+    divergence); empty (an ok run whose final mesh is empty); off (an ok run whose final mesh is off the
+    shape, records.off_shape); regressed (an ok run whose last probe's chamfer L2 is over REGRESSION x its
+    best probe's); diverged (runs with any of nonfinite, empty, off, regressed); worst_ratio (the largest last/best probe chamfer over the ok runs with probes, NaN if none)."""
     rows: dict[tuple[str, str], dict[str, Any]] = {}
     for r in records:
         row = rows.setdefault((str(r.get("model")), shape_name(r)), {
             "model": str(r.get("model")), "shape": shape_name(r), "runs": 0, "nonfinite": 0, "failed_other": 0,
-            "empty": 0, "regressed": 0, "diverged": 0, "worst_ratio": math.nan})
+            "empty": 0, "off": 0, "regressed": 0, "diverged": 0, "worst_ratio": math.nan})
         row["runs"] += 1
         if r.get("status") != "ok":
             nonfinite = (r.get("fit") or {}).get("stop") == "nonfinite"
             row["nonfinite" if nonfinite else "failed_other"] += 1
             row["diverged"] += nonfinite
             continue
-        empty = bool((r.get("metrics") or {}).get("empty_reconstruction"))
+        empty, off = empty_mesh(r), off_shape(r)
         _, v = curve(r, "chamfer_l2")
         ratio = float(v[-1] / v.min()) if len(v) and v.min() > 0 else math.nan
         regressed = ratio > REGRESSION
         row["worst_ratio"] = float(np.fmax(row["worst_ratio"], ratio))  # fmax skips a NaN side
         row["empty"] += empty
+        row["off"] += off
         row["regressed"] += regressed
-        row["diverged"] += empty or regressed
+        row["diverged"] += empty or off or regressed
     return list(rows.values())
 
 
 def stability_markdown(rows: list[dict[str, Any]]) -> str:
     """The divergence table."""
-    lines = ["| model | shape | runs | diverged | stopped non-finite | empty mesh | regressed | worst last/best probe "
-             "| failed otherwise |", "|---" * 9 + "|"]
+    lines = ["| model | shape | runs | diverged | stopped non-finite | empty mesh | off the shape | regressed "
+             "| worst last/best probe | failed otherwise |", "|---" * 10 + "|"]
     for r in rows:
         ratio = f"{r['worst_ratio']:.3g}" if math.isfinite(r["worst_ratio"]) else "–"
         lines.append(f"| {r['model']} | {r['shape']} | {r['runs']} | {r['diverged']} of {r['runs']} | {r['nonfinite']} "
-                     f"| {r['empty']} | {r['regressed']} | {ratio} | {r['failed_other']} |")
-    lines += ["", f"A run diverged when its fit stopped on a non-finite loss or weight, its final mesh is empty, or "
-              f"it regressed: its last probe's chamfer L2 is over {REGRESSION:g}× its best probe's (worst last/best: "
+                     f"| {r['empty']} | {r['off']} | {r['regressed']} | {ratio} | {r['failed_other']} |")
+    lines += ["", f"A run diverged when its fit stopped on a non-finite loss or weight, its final mesh is empty or "
+              f"off the shape ({WIDEST_F.replace('fscore', 'F')} = 0: no sampled point of either surface near the other), or it regressed: its last probe's chamfer L2 is over {REGRESSION:g}× its best probe's (worst last/best: "
               "the largest such ratio over the finished runs; 1 means the last probe was the best; an empty probe "
               "mesh scores the chamfer penalty). A run that failed for another reason (input, disk, extraction or "
               "metrics) is not counted as a divergence. runs: the records found; a sweep's missing runs are "

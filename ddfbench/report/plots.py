@@ -33,7 +33,7 @@ import numpy as np  # noqa: E402
 
 from ddfbench.metric_registry import by_name as registry_metrics  # noqa: E402
 from ddfbench.report import convergence  # noqa: E402
-from ddfbench.report.records import as_float, chamfer_l2, ok_records, shape_name  # noqa: E402
+from ddfbench.report.records import as_float, chamfer_l2, no_result, ok_records, shape_name  # noqa: E402
 from ddfbench.report.tables import override_labels  # noqa: E402
 
 PLOTS_BY_EXPERIMENT: dict[str, tuple[str, ...]] = {
@@ -158,7 +158,7 @@ def plot_fit_curves(records: list[dict[str, Any]], out_dir: str) -> list[str]:
 
 def _config_points(records: list[dict[str, Any]], cost: str) -> list[dict[str, Any]]:
     """Per configuration (seeds pooled): model, shape, mean cost x, mean chamfer y, empty (every run's
-    reconstruction was empty: y is the penalty)."""
+    reconstruction was empty or off the shape: no method result, drawn as x and kept off the front)."""
     groups: dict[str, list[dict[str, Any]]] = defaultdict(list)
     for r in ok_records(records):
         groups[_config_id(r)].append(r)
@@ -166,7 +166,7 @@ def _config_points(records: list[dict[str, Any]], cost: str) -> list[dict[str, A
     for members in groups.values():
         x, _ = _mean_std([as_float((m.get("cost") or {}).get(cost)) for m in members])
         y, _ = _mean_std([chamfer_l2(m) for m in members])
-        empty = all((m.get("metrics") or {}).get("empty_reconstruction") for m in members)
+        empty = all(no_result(m) for m in members)
         out.append({"model": str(members[0].get("model")), "shape": shape_name(members[0]), "x": x, "y": y, "empty": empty})
     return out
 

@@ -10,11 +10,14 @@ finished, the shape, a number, and the chamfer L2 (through ddfbench.metric_regis
 
 from __future__ import annotations
 
+import math
 from typing import Any, Iterable
 
-from ddfbench.metric_registry import as_float, by_name
+from ddfbench.metric_registry import FSCORE_RADII, as_float, by_name
 
-__all__ = ["Record", "as_float", "chamfer_l2", "ok_records", "shape_name"]
+__all__ = ["Record", "as_float", "chamfer_l2", "empty_mesh", "no_result", "off_shape", "ok_records", "shape_name"]
+
+WIDEST_F = f"fscore@{max(FSCORE_RADII)}"  # 0 there: no sampled point of either surface near the other
 
 Record = dict[str, Any]
 
@@ -32,3 +35,22 @@ def shape_name(rec: Record) -> str:
 def chamfer_l2(rec: Record) -> float:
     """The record's chamfer L2 (squared distances, raw: not ×10³; unit-cube frame), NaN where absent."""
     return by_name()["chamfer_l2"].read(rec)
+
+
+def empty_mesh(rec: Record) -> bool:
+    """Whether the run's reconstruction was empty (its metrics are the defined penalty)."""
+    return bool((rec.get("metrics") or {}).get("empty_reconstruction"))
+
+
+def off_shape(rec: Record) -> bool:
+    """Whether the run's reconstruction is not empty but shares no surface with the ground truth: its F-score
+    at the widest radius is 0, i.e. no sampled point of either surface lies within that distance of the other
+    (a fit that never found the shape). It depends on the samples: one sampled point near the shape makes
+    the run a result. A record without that F-score (or NaN) is not judged (False)."""
+    f = by_name()[WIDEST_F].read(rec)
+    return not empty_mesh(rec) and math.isfinite(f) and f == 0.0
+
+
+def no_result(rec: Record) -> bool:
+    """An empty reconstruction or one off the shape: not a method result."""
+    return empty_mesh(rec) or off_shape(rec)

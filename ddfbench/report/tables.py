@@ -22,6 +22,7 @@ import numpy as np
 import pandas as pd
 
 from ddfbench import metric_registry
+from ddfbench.report.records import WIDEST_F, empty_mesh, off_shape
 from ddfbench.report.stats import INTERVAL_NAME, best_and_ties, summarize_values
 from ddfbench.runs import NON_SEMANTIC_KEYS
 
@@ -30,16 +31,6 @@ SEED_KEYS = ("seed",)
 INCOMPLETE = "†"  # marks a row with fewer ok runs than the fullest row
 TIE = "≈"  # marks values whose interval overlaps the best one's
 NOT_CONVERGED = "not converged"  # the n cell of a row whose every reconstruction was empty or off the shape
-WIDEST_F = f"fscore@{max(metric_registry.FSCORE_RADII)}"  # 0 there: no point of either surface near the other
-
-
-def off_shape(rec: dict[str, Any]) -> bool:
-    """Whether a run's reconstruction is not empty but shares no surface with the ground truth: its F-score at
-    the widest radius is 0 (no sampled point of either surface within that distance of the other), as for a
-    fit that never found the shape. A record without that F-score is not judged (False)."""
-    m = rec.get("metrics") or {}
-    f = metric_registry.by_name()[WIDEST_F].read(rec)
-    return not m.get("empty_reconstruction") and math.isfinite(f) and f == 0.0
 
 
 def _metrics() -> dict[str, metric_registry.Metric]:
@@ -79,12 +70,11 @@ def budget_label(rec: dict[str, Any]) -> str:
 
 def record_row(rec: dict[str, Any]) -> dict[str, Any]:
     """One flat row of a record: identity, status, every registry metric and noise floor (NaN where absent)."""
-    m = rec.get("metrics") or {}
     row: dict[str, Any] = {
         "key": rec.get("key"), "status": rec.get("status"), "error": rec.get("error"),
         "experiment": rec.get("experiment"), "model": rec.get("model"), "family": rec.get("family"),
         "shape": (rec.get("shape") or {}).get("name"), "seed": (rec.get("config") or {}).get("seed"),
-        "empty": bool(m.get("empty_reconstruction")), "off": off_shape(rec), "started": str(rec.get("started") or ""),
+        "empty": empty_mesh(rec), "off": off_shape(rec), "started": str(rec.get("started") or ""),
         "budget": budget_label(rec),
     }
     for metric in metric_registry.METRICS:
