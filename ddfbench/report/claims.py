@@ -152,14 +152,14 @@ def table1_bunny(records: Records) -> list[Claim]:
             out.append(_missing(f"{model}: bunny chamfer at most the paper's 0.589×10³", src, paper, experiment))
             continue
         s = summarize_values(chamfer_l2(r) for r in mine)
-        empty = all(no_result(r) for r in mine)
+        no_results = all(no_result(r) for r in mine)
         steps = sorted({int((r.get("fit") or {}).get("steps") or 0) for r in mine})
         what = "empty mesh" if all(empty_mesh(r) for r in mine) else "empty mesh or a surface off the shape"
-        measured = (f"{what} in all {len(mine)} runs ({'/'.join(map(str, steps))} steps)" if empty
+        measured = (f"{what} in all {len(mine)} runs ({'/'.join(map(str, steps))} steps)" if no_results
                     else f"CD×10³ {_interval(s)}")
         out.append(Claim(f"{model}: bunny chamfer at most the paper's 0.589×10³", src, paper,
                          measured, f"`{experiment}`: {model} × bunny ({len(mine)} records)",
-                         NOT_CONVERGED if empty else below(s, value), "Paper: 20 h on an RTX 3090; ours: fixed CPU steps (representations) or "
+                         NOT_CONVERGED if no_results else below(s, value), "Paper: 20 h on an RTX 3090; ours: fixed CPU steps (representations) or "
                          "10 minutes (paper_ddf). " + KAOLIN_NOTE.format(n=_n_points(recs))))
     return out
 

@@ -14,7 +14,7 @@ from typing import Any, Iterable
 import numpy as np
 
 from ddfbench.metric_registry import by_name
-from ddfbench.report.records import WIDEST_F, Record, empty_mesh, off_shape, ok_records, shape_name
+from ddfbench.report.records import OFF_SHAPE_RULE, Record, empty_mesh, off_shape, ok_records, shape_name
 
 FLOOR_MULTIPLES = (5.0, 2.0)  # time-to-reach k x the chamfer noise floor
 NOT_REACHED = "not reached"
@@ -105,7 +105,8 @@ def stability_rows(records: list[Record]) -> list[dict[str, Any]]:
     non-finite loss or weight: record fit.stop "nonfinite"); failed_other (failed for another reason: not a
     divergence); empty (an ok run whose final mesh is empty); off (an ok run whose final mesh is off the
     shape, records.off_shape); regressed (an ok run whose last probe's chamfer L2 is over REGRESSION x its
-    best probe's); diverged (runs with any of nonfinite, empty, off, regressed); worst_ratio (the largest last/best probe chamfer over the ok runs with probes, NaN if none)."""
+    best probe's); diverged (runs with any of nonfinite, empty, off, regressed); worst_ratio (the largest
+    last/best probe chamfer over the ok runs with probes, NaN if none)."""
     rows: dict[tuple[str, str], dict[str, Any]] = {}
     for r in records:
         row = rows.setdefault((str(r.get("model")), shape_name(r)), {
@@ -138,7 +139,8 @@ def stability_markdown(rows: list[dict[str, Any]]) -> str:
         lines.append(f"| {r['model']} | {r['shape']} | {r['runs']} | {r['diverged']} of {r['runs']} | {r['nonfinite']} "
                      f"| {r['empty']} | {r['off']} | {r['regressed']} | {ratio} | {r['failed_other']} |")
     lines += ["", f"A run diverged when its fit stopped on a non-finite loss or weight, its final mesh is empty or "
-              f"off the shape ({WIDEST_F.replace('fscore', 'F')} = 0: no sampled point of either surface near the other), or it regressed: its last probe's chamfer L2 is over {REGRESSION:g}× its best probe's (worst last/best: "
+              f"off the shape ({OFF_SHAPE_RULE}: no sampled point of either surface near the other), or it regressed: its last probe's chamfer L2 is over "
+              f"{REGRESSION:g}× its best probe's (worst last/best: "
               "the largest such ratio over the finished runs; 1 means the last probe was the best; an empty probe "
               "mesh scores the chamfer penalty). A run that failed for another reason (input, disk, extraction or "
               "metrics) is not counted as a divergence. runs: the records found; a sweep's missing runs are "

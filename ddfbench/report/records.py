@@ -15,9 +15,11 @@ from typing import Any, Iterable
 
 from ddfbench.metric_registry import FSCORE_RADII, as_float, by_name
 
-__all__ = ["Record", "as_float", "chamfer_l2", "empty_mesh", "no_result", "off_shape", "ok_records", "shape_name"]
+__all__ = ["OFF_SHAPE_RULE", "Record", "WIDEST_F", "as_float", "chamfer_l2", "empty_mesh", "no_result", "off_shape",
+           "ok_records", "shape_name"]
 
 WIDEST_F = f"fscore@{max(FSCORE_RADII)}"  # 0 there: no sampled point of either surface near the other
+OFF_SHAPE_RULE = f"{by_name()[WIDEST_F].label} = 0"  # as the reports write it
 
 Record = dict[str, Any]
 

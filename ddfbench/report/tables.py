@@ -22,7 +22,7 @@ import numpy as np
 import pandas as pd
 
 from ddfbench import metric_registry
-from ddfbench.report.records import WIDEST_F, empty_mesh, off_shape
+from ddfbench.report.records import OFF_SHAPE_RULE, empty_mesh, off_shape
 from ddfbench.report.stats import INTERVAL_NAME, best_and_ties, summarize_values
 from ddfbench.runs import NON_SEMANTIC_KEYS
 
@@ -288,8 +288,8 @@ def _footnotes(df: pd.DataFrame) -> list[str]:
     if "n_empty" in df and (df["n_empty"] > 0).any():
         lines.append("(k empty): k runs gave an empty reconstruction; their geometry metrics are the defined penalty.")
     if "n_off" in df and (df["n_off"] > 0).any():
-        lines.append(f"(k off the shape): k runs gave a surface with {WIDEST_F.replace('fscore', 'F')} = 0 (no sampled point of "
-                     "either surface near the other: the fit never found the shape); their measured metrics stay in the mean.")
+        lines.append(f"(k off the shape): k runs gave a surface with {OFF_SHAPE_RULE} (no sampled point of either "
+                     "surface near the other: the fit never found the shape); their measured metrics stay in the mean.")
     if _partial_metrics(df):
         lines.append("(of k): the value is defined in k of the row's n runs (a depth error needs pixels that both "
                      "the render and the reference hit); its mean, std and interval are over those k.")
