@@ -37,7 +37,7 @@ from ddfbench.runs import code_commits, code_sha, find_records
 RECORD_SCENE = "record"  # --scene record: each run's own scene as its record gives it
 
 
-def _artifact(rec: dict[str, Any], name: str) -> str:
+def artifact(rec: dict[str, Any], name: str) -> str:
     """The path of the run's artifact `name`; InputError naming the run folder when it has none."""
     rel = (rec.get("artifacts") or {}).get(name)
     path = os.path.join(rec["_dir"], str(rel)) if rel else ""
@@ -50,7 +50,7 @@ def _reconstruction(rec: dict[str, Any]) -> trimesh.Trimesh:
     """The saved reconstruction; an empty mesh where the run had none (its mesh was empty: no .ply)."""
     if not (rec.get("artifacts") or {}).get("reconstruction"):
         return trimesh.Trimesh()
-    return trimesh.load(_artifact(rec, "reconstruction"), force="mesh", process=False)
+    return trimesh.load(artifact(rec, "reconstruction"), force="mesh", process=False)
 
 
 def _image_metrics(rec: dict[str, Any], gt: trimesh.Trimesh, scene: dict[str, Any]) -> dict[str, Any]:
@@ -58,7 +58,7 @@ def _image_metrics(rec: dict[str, Any], gt: trimesh.Trimesh, scene: dict[str, An
     from ddfbench.render import mesh_reference, render_scene  # the renderer's imports are only needed with a scene
 
     domain = float(rec["config"].get("domain", BOX_HALF))
-    rep = load_family(rec["family"]).load(_artifact(rec, "model"), domain=domain)
+    rep = load_family(rec["family"]).load(artifact(rec, "model"), domain=domain)
     once = {**scene, "timing": {**(scene.get("timing") or {}), "repeats": 1, "warmup": 0}}
     with tempfile.TemporaryDirectory(prefix="ddfbench-reeval-") as tmp:
         seed = int(rec["config"].get("seed", 0))
@@ -71,7 +71,7 @@ def reevaluated(rec: dict[str, Any], n_points: int, scene: dict[str, Any] | str 
     seed and metric switches), image metrics when the scene (a scene config, or RECORD_SCENE: the
     run's own) renders something."""
     cfg, ev = rec["config"], rec["config"].get("eval") or {}
-    gt = trimesh.load(_artifact(rec, "gt_mesh"), force="mesh", process=False)
+    gt = trimesh.load(artifact(rec, "gt_mesh"), force="mesh", process=False)
     out = copy.deepcopy(rec)
     out["metrics"] = geometry_metrics(gt, _reconstruction(rec), n_points, [float(r) for r in ev["radii"]],
                                       seed=int(cfg.get("seed", 0)), noise_floor=bool(ev.get("noise_floor", True)),

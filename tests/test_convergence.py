@@ -58,6 +58,21 @@ def test_report_writes_the_band_plot_and_the_time_to_floor_table(tmp_path):
     assert "| neural_sdf | bone | 3 |" in table and "time to 2× floor" in table
     assert "Time to reach the noise floor" in (out / "report.md").read_text()
     assert "| neural_sdf | bone | 3 | 0 of 3 |" in (out / "stability.md").read_text()
+    probes = (out / "probes.md").read_text()
+    assert "| neural_sdf | bone | 2 | 2 | – | 30 | 0.09 | 0.999 |" in probes  # seed 2's last probe
+    assert probes.count("| neural_sdf |") == 18 and "Every probe of every run" in (out / "report.md").read_text()
+
+
+def test_probe_rows_are_each_ok_runs_probes_in_seed_and_step_order_with_their_epoch():
+    late = run("gan_sdf", "bunny", 1, [(5.0, 2e-3), (50.0, 4e-4)])
+    late["fit"].update(steps=4, epochs=2.0)  # 2 steps an epoch
+    early = run("gan_sdf", "bunny", 0, [(9.0, 3e-3)])
+    failed = {**run("gan_sdf", "bunny", 2, [(1.0, 1e-3)]), "status": "failed"}
+    rows = convergence.probe_rows([late, failed, early])
+    assert [(r["seed"], r["step"]) for r in rows] == [(0, 0), (1, 0), (1, 1)]
+    assert rows[2]["epoch"] == 0.5 and rows[2]["seconds"] == 50.0 and rows[2]["fscore@0.01"] == pytest.approx(0.996)
+    assert math.isnan(rows[0]["epoch"])  # no epoch count in that record
+    assert "| gan_sdf | bunny | 1 | 1 | 0.5 | 50 | 0.4 | 0.996 |" in convergence.probe_markdown(rows)
 
 
 @pytest.mark.slow  # expands the sweep (~0.2 s a job)

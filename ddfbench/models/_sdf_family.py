@@ -67,14 +67,16 @@ class SDFFamily(Representation):
         nrm, valid, evals, backward = self.surface_normals(points)
         return to_hits(result, directions, nrm.detach().cpu().numpy(), valid.cpu().numpy(), evals, backward)
 
-    def to_mesh(self, resolution: int) -> trimesh.Trimesh:
-        """Marching cubes of the field on a resolution^3 grid over the domain box (empty mesh flagged in extract_info).
+    def to_mesh(self, resolution: int, level: float = 0.0) -> trimesh.Trimesh:
+        """Marching cubes of the field's `level` set (unit-cube units; 0: the surface) on a resolution^3 grid over
+        the domain box (empty mesh flagged in extract_info).
 
         cfg.extract_coarse > 1 evaluates coarse to fine, only near the surface, assuming the field's slope
         is at most cfg.extract_lipschitz there (extract.banded_grid); 1 evaluates every node.
         """
+        field = self.sdf if level == 0 else (lambda p: self.sdf(p) - np.float32(level))
         mesh, self.extract_info = extract.sdf_to_mesh(
-            self.sdf, int(resolution), self.domain, coarse=int(self.cfg.get("extract_coarse", 1)),
+            field, int(resolution), self.domain, coarse=int(self.cfg.get("extract_coarse", 1)),
             lipschitz=float(self.cfg.get("extract_lipschitz", 1.0)))
         return mesh
 

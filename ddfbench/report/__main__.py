@@ -8,6 +8,7 @@ Writes, from the run records below the folder:
                                    table, the plots, and every record key the table was built from
   time_to_floor.md, .csv           convergence: time to reach 2x and 5x the noise floor (report.convergence)
   stability.md, .csv               convergence: how many runs diverged (non-finite, empty mesh, regressed)
+  probes.md, .csv                  convergence: every probe of every run (step, epoch, fit s, CD-L2, F-scores)
   paired.md                        ablation and sampling: paired differences against the baseline setting
                                    on the same seeds (ddfbench.report.paired)
 A report comes from one code commit: records from several commits are refused (exit 2) unless
@@ -130,6 +131,9 @@ def write_report(records_dir: str, out_dir: str, note: str | None = None,
         rows = convergence.stability_rows(records)
         extra.append(_write_section(out_dir, "stability", "Stability: how many runs diverged", rows,
                                     convergence.stability_markdown(rows)))
+        rows = convergence.probe_rows(records)
+        extra.append(_write_section(out_dir, "probes", "Every probe of every run", rows,
+                                    convergence.probe_markdown(rows)))
     lines = [f"# {experiment}", ""]
     if note:
         lines += [f"**{note}**", ""]

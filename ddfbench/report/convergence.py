@@ -1,5 +1,6 @@
 """Convergence over a long fit: probe curves per seed, their median and min–max band, time to reach
-k × the noise floor, and how many runs diverged (`+experiment=convergence`, `paper_ddf`, `gan_epochs`).
+k × the noise floor, how many runs diverged, and every probe as a table (`+experiment=convergence`,
+`paper_ddf`, `gan_epochs`).
 
 A run's curve is its accuracy probes (record fit.probes: seconds of training, chamfer_l2, fscore@r).
 Between probes a curve holds its last value (a step function: nothing is interpolated that was not
@@ -97,6 +98,38 @@ def to_markdown(rows: list[dict[str, Any]]) -> str:
     lines += ["", "Seconds of training (probes excluded) at the first probe whose chamfer L2 is at most k × the "
               "noise floor; median over seeds, (reached/seeds); 'not reached' where fewer than half the seeds got "
               "there within the budget. Probes are log-spaced, so a time is the probe's, an upper bound."]
+    return "\n".join(lines) + "\n"
+
+
+def probe_rows(records: list[Record]) -> list[dict[str, Any]]:
+    """One row per probe of every ok run, ordered by model, shape, seed and step: model, shape, seed, key,
+    step, epoch (step x the fit's epochs / steps; NaN where the record has no epoch count), seconds of
+    training, and each metric the probe holds (chamfer_l2 in the record's units, fscore@r)."""
+    rows = []
+    for r in ok_records(records):
+        fit = r.get("fit") or {}
+        steps, epochs = float(fit.get("steps") or 0), float(fit.get("epochs") or math.nan)
+        for p in fit.get("probes") or []:
+            step = int(p.get("step", 0))
+            rows.append({"model": str(r.get("model")), "shape": shape_name(r),
+                         "seed": int((r.get("config") or {}).get("seed", 0)), "key": r.get("key"), "step": step,
+                         "epoch": step * epochs / steps if steps > 0 else math.nan,
+                         **{k: v for k, v in p.items() if k != "step"}})
+    return sorted(rows, key=lambda x: (x["model"], x["shape"], x["seed"], x["step"]))
+
+
+def probe_markdown(rows: list[dict[str, Any]]) -> str:
+    """The probe table: chamfer L2 x10^3 and F@0.01 at each probe of each run."""
+    lines = ["| model | shape | seed | step | epoch | fit s | CD-L2 ×10³ | F@0.01 |", "|---" * 8 + "|"]
+    for r in rows:
+        f, epoch = r.get("fscore@0.01", math.nan), f"{r['epoch']:.3g}" if math.isfinite(r["epoch"]) else "–"
+        lines.append(f"| {r['model']} | {r['shape']} | {r['seed']} | {r['step']:,} | {epoch} "
+                     f"| {r['seconds']:.4g} | {r['chamfer_l2'] * 1e3:.4g} | {f:.3g} |")
+    lines += ["", "Each run's accuracy probes as its record holds them (fit.probes): the probe mesh's resolution "
+              "(train.probe_resolution) and point count (train.probe_points) are the probe's, not the final "
+              "evaluation's, so a last probe need not equal the run's final metrics. fit s: seconds of training "
+              "at the probe (probes excluded); epoch: step × the fit's epochs / steps. probes.csv has every "
+              "F-score radius."]
     return "\n".join(lines) + "\n"
 
 
