@@ -72,7 +72,8 @@ def zero_level_row(rec: dict[str, Any], n_points: int) -> dict[str, Any]:
     radii = [float(r) for r in ev["radii"]]
     shifted = geometry_metrics(gt, rep.to_mesh(int(ev["mesh_resolution"]), level=level), int(ev["n_points"]), radii,
                                seed=seed, noise_floor=False, with_point_to_surface=False)
-    row: dict[str, Any] = {"model": rec["model"], "shape": rec["shape"]["name"], "seed": seed, "key": rec["key"],
+    row: dict[str, Any] = {"model": rec["model"], "shape": rec["shape"]["name"],
+                           "capacity": str(cfg.get("capacity") or ""), "seed": seed, "key": rec["key"],
                            "n_points": n_points, "median_slope": float(np.median(slope)),
                            **{f"offset_p{q}": float(v) for q, v in zip(PERCENTILES, np.percentile(offset, PERCENTILES))},
                            "offset_mean_abs": float(np.abs(offset).mean()), "level": level}
@@ -84,11 +85,11 @@ def zero_level_row(rec: dict[str, Any], n_points: int) -> dict[str, Any]:
 
 def to_markdown(rows: list[dict[str, Any]]) -> str:
     """The per-run table: offsets ×10³ (unit-cube units), the median level and CD-L2 ×10³ / F@0.01 at both levels."""
-    lines = ["| model | shape | seed | offset ×10³ p5 / p25 / p50 / p75 / p95 | mean abs offset ×10³ | median slope "
-             "| level ×10³ | CD-L2 ×10³ at 0 → at level | F@0.01 at 0 → at level |", "|---" * 9 + "|"]
+    lines = ["| model | shape | capacity | seed | offset ×10³ p5 / p25 / p50 / p75 / p95 | mean abs offset ×10³ | median slope "
+             "| level ×10³ | CD-L2 ×10³ at 0 → at level | F@0.01 at 0 → at level |", "|---" * 10 + "|"]
     for r in rows:
         offs = " / ".join(f"{r[f'offset_p{q}'] * 1e3:.3g}" for q in PERCENTILES)
-        lines.append(f"| {r['model']} | {r['shape']} | {r['seed']} | {offs} | {r['offset_mean_abs'] * 1e3:.3g} "
+        lines.append(f"| {r['model']} | {r['shape']} | {r['capacity'] or '–'} | {r['seed']} | {offs} | {r['offset_mean_abs'] * 1e3:.3g} "
                      f"| {r['median_slope']:.3g} | {r['level'] * 1e3:.3g} "
                      f"| {r['chamfer_l2_at_0'] * 1e3:.4g} → {r['chamfer_l2_at_level'] * 1e3:.4g} "
                      f"| {r.get('fscore@0.01_at_0', math.nan):.3g} → {r.get('fscore@0.01_at_level', math.nan):.3g} |")
@@ -97,6 +98,11 @@ def to_markdown(rows: list[dict[str, Any]]) -> str:
               "one); level: the median field value on the GT surface, the level the mesh was extracted at again "
               "(same resolution and options as the run's); 'at 0' is the record's own final result."]
     return "\n".join(lines) + "\n"
+
+
+def _table_order(rec: dict[str, Any]) -> tuple:
+    cfg = rec["config"]
+    return rec["model"], rec["shape"]["name"], str(cfg.get("capacity") or ""), int(cfg.get("seed", 0)), rec["key"]
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -121,7 +127,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.threads:
         torch.set_num_threads(args.threads)
     rows, failed = [], 0
-    for rec in sorted(recs, key=lambda r: (r["model"], r["shape"]["name"], int(r["config"].get("seed", 0)), r["key"])):
+    for rec in sorted(recs, key=_table_order):
         try:
             rows.append(zero_level_row(rec, args.n_points))
         except (InputError, OSError, KeyError, ValueError) as err:
