@@ -66,6 +66,21 @@ def _image_metrics(rec: dict[str, Any], gt: trimesh.Trimesh, scene: dict[str, An
         return render_scene(rep, mesh_reference(gt, domain, backend=backend), once, tmp, seed).get("metrics", {})
 
 
+def finished_records(results: str, models: list[str] | None) -> list[dict[str, Any]]:
+    """The ok records below `results` (of `models` only, when given); InputError when there are none."""
+    recs = [r for r in find_records(results) if r.get("status") == "ok" and (not models or r.get("model") in models)]
+    if not recs:
+        raise InputError(f"{results}: no finished run records" + (f" of {models}" if models else ""))
+    return recs
+
+
+def measured_header(tool: str, argv: list[str] | None, measured: str, records: list[dict[str, Any]]) -> str:
+    """A table's first line: the command, what was measured, the records' code commits and the measuring code's."""
+    command = f"`python -m ddfbench.{tool} {' '.join(argv if argv is not None else sys.argv[1:])}`"
+    return (f"{command}: {measured}, records of code {', '.join(c[:7] for c in code_commits(records))}, "
+            f"measured by code {(code_sha() or 'unknown')[:7]}.")
+
+
 def reevaluated(rec: dict[str, Any], n_points: int, scene: dict[str, Any] | str | None) -> dict[str, Any]:
     """A copy of the record whose metrics are measured again: geometry at n_points (the record's radii,
     seed and metric switches), image metrics when the scene (a scene config, or RECORD_SCENE: the
@@ -98,10 +113,7 @@ def main(argv: list[str] | None = None) -> int:
             raise InputError(f"--n-points {args.n_points} / --threads {args.threads}: need n-points >= 1, threads >= 0")
         scene = (plugins.plugin_yaml("scene", args.scene) if args.scene and args.scene != RECORD_SCENE
                  else args.scene)
-        recs = [r for r in find_records(args.results) if r.get("status") == "ok"
-                and (not args.model or r.get("model") in args.model)]
-        if not recs:
-            raise InputError(f"{args.results}: no finished run records" + (f" of {args.model}" if args.model else ""))
+        recs = finished_records(args.results, args.model)
     except InputError as err:
         print(f"ddfbench.reevaluate: {err}", file=sys.stderr)
         return 2
@@ -121,10 +133,8 @@ def main(argv: list[str] | None = None) -> int:
     if done:
         os.makedirs(args.out, exist_ok=True)
         df = tables.summarize(done)
-        command = f"`python -m ddfbench.reevaluate {' '.join(argv if argv is not None else sys.argv[1:])}`"
-        md = (f"{command}: {len(done)} runs measured again ({failed} unreadable), records of code "
-              f"{', '.join(c[:7] for c in code_commits(done))}, measured by code {(code_sha() or 'unknown')[:7]}.\n\n"
-              + tables.to_markdown(df))
+        md = (measured_header("reevaluate", argv, f"{len(done)} runs measured again ({failed} unreadable)", done)
+              + "\n\n" + tables.to_markdown(df))
         with open(os.path.join(args.out, "table.md"), "w") as fh:
             fh.write(md)
         tables.to_csv(df, os.path.join(args.out, "table.csv"))

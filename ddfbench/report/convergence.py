@@ -115,7 +115,7 @@ def probe_rows(records: list[Record]) -> list[dict[str, Any]]:
                          "seed": int((r.get("config") or {}).get("seed", 0)), "key": r.get("key"), "step": step,
                          "epoch": step * epochs / steps if steps > 0 else math.nan,
                          **{k: v for k, v in p.items() if k != "step"}})
-    return sorted(rows, key=lambda x: (x["model"], x["shape"], x["seed"], x["step"]))
+    return sorted(rows, key=lambda x: (x["model"], x["shape"], x["seed"], str(x["key"]), x["step"]))
 
 
 def probe_markdown(rows: list[dict[str, Any]]) -> str:
