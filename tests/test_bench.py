@@ -59,8 +59,10 @@ def test_each_issue_comparison_is_present(small_run):
     assert len(rows["grid"]) == 2 and len(rows["metrics"]) == 2
     assert {r.split(":")[0] for r in rows["training"]} == {"ddf", "neural_sdf", "gan_sdf"}
     assert any(": fit seconds" in r for r in rows["end_to_end"])
-    assert [r.split(":")[0] for r in rows["field_cost"][:2]] == [f"gan_sdf generator, {c} points a call" for c in (64, 256)]
-    assert all("dense fp32 matrix product" in r for r in rows["field_cost"][2:]) and len(rows["field_cost"]) == 4
+    assert rows["field_cost"][:2] == [f"gan_sdf generator as matrix products, {c} points a call: points/s | the same "
+                                      f"generator through its Conv1d module, {c} points a call" for c in (64, 256)]
+    assert all(r.endswith("neural_sdf_tuned field, 65536 points a call, points/s") for r in rows["field_cost"][2:4])
+    assert all("dense fp32 matrix product" in r for r in rows["field_cost"][4:]) and len(rows["field_cost"]) == 6
     assert not any(": sampling seconds" in r for r in rows["end_to_end"])  # the small run is a mesh: no samples
 
 

@@ -4,8 +4,9 @@ matrix-product speed each network gets, measured side by side in one process.
 Figures (no grad, random points in the field box, networks, points and matrices on the bench's device,
 `threads` torch threads):
 - the GAN-SDF generator (the thesis' Conv1d stack) on `points` points at each eval chunk in `chunks`
-  (points per call): points/s against the tuned neural SDF's field on one call of 65,536 points (the
-  SDF families' batch);
+  (points per call), two ways: as the family evaluates it (matrix products, ddfbench.models._gan_gemm)
+  against the Conv1d module it trains (the ratio is the rewrite's speed-up), each at its fastest chunk
+  against the tuned neural SDF's field on one call of 65,536 points (the SDF families' batch);
 - each network's achieved GFLOP/s (multiply-adds of its Linear and Conv1d layers x 2 per point, from
   `flops_per_point`) against a dense fp32 matrix product of side `gemm` on the same threads, the speed a
   well-shaped product reaches here.
@@ -64,24 +65,33 @@ def run(ctx: Context) -> SectionResult:
             return gan.field(points)
         return fn
 
-    fns = {"sdf": lambda: sdf.field(sdf_points),
-           "gemm": lambda: a @ b, **{f"gan@{c}": gan_at(int(c)) for c in s["chunks"]}}
+    def conv1d_at(chunk: int):
+        return lambda: torch.cat([gan.net(points[i : i + chunk]) for i in range(0, n, chunk)])
+
+    chunks = [int(c) for c in s["chunks"]]
+    fns = {"sdf": lambda: sdf.field(sdf_points), "gemm": lambda: a @ b,
+           **{f"gan@{c}": gan_at(c) for c in chunks}, **{f"conv1d@{c}": conv1d_at(c) for c in chunks}}
     with torch.no_grad():
         timed = measure_side_by_side(fns, ctx.repeats, ctx.warmup, ctx.device)
     flops = {"sdf": flops_per_point(sdf.net), "gan": flops_per_point(gan.net)}
     gemm_gflops = 2 * side**3 / timed["gemm"][1].median_s / 1e9
-    sdf_rate = timed["sdf"][1].rate(SDF_BATCH)
+    rate = {name: t.rate(SDF_BATCH if name == "sdf" else n) for name, (_, t) in timed.items() if name != "gemm"}
     kw = dict(device=ctx.device, threads=ctx.threads)
     result.details = {"flops_per_point": flops, "points": n, "gemm_side": side, "gemm_gflops": gemm_gflops,
                       "timings": {name: t.as_dict() for name, (_, t) in timed.items()}}
-    for c in s["chunks"]:
+    for c in chunks:
         result.rows.append(compare(
-            "field_cost", f"gan_sdf generator, {c} points a call: points/s", timed[f"gan@{c}"][1].rate(n), "points/s",
-            f"{s['sdf_preset']} field, {SDF_BATCH} points a call, points/s", sdf_rate, **kw))
-    best = max(s["chunks"], key=lambda c: timed[f"gan@{c}"][1].rate(n))
-    for name, label, rate in (("sdf", f"{s['sdf_preset']} field ({SDF_BATCH} a call)", sdf_rate),
-                              ("gan", f"gan_sdf generator ({best} a call, its fastest)", timed[f"gan@{best}"][1].rate(n))):
+            "field_cost", f"gan_sdf generator as matrix products, {c} points a call: points/s", rate[f"gan@{c}"],
+            "points/s", f"the same generator through its Conv1d module, {c} points a call", rate[f"conv1d@{c}"], **kw))
+    best = {way: max(chunks, key=lambda c: rate[f"{way}@{c}"]) for way in ("gan", "conv1d")}
+    sdf_label = f"{s['sdf_preset']} field, {SDF_BATCH} points a call, points/s"
+    for way, label in (("gan", "gan_sdf field (matrix products)"), ("conv1d", "gan_sdf Conv1d module")):
         result.rows.append(compare(
-            "field_cost", f"{label}: GFLOP/s ({flops[name]:,} FLOP a point)", rate * flops[name] / 1e9, "GFLOP/s",
+            "field_cost", f"{label}, {best[way]} points a call (its fastest): points/s", rate[f"{way}@{best[way]}"],
+            "points/s", sdf_label, rate["sdf"], **kw))
+    for name, label, r in (("sdf", f"{s['sdf_preset']} field ({SDF_BATCH} a call)", rate["sdf"]),
+                           ("gan", f"gan_sdf field ({best['gan']} a call, its fastest)", rate[f"gan@{best['gan']}"])):
+        result.rows.append(compare(
+            "field_cost", f"{label}: GFLOP/s ({flops[name]:,} FLOP a point)", r * flops[name] / 1e9, "GFLOP/s",
             f"dense fp32 matrix product {side}x{side}, GFLOP/s", gemm_gflops, **kw))
     return result

@@ -22,7 +22,7 @@ SIZES: dict[str, dict[str, dict]] = {
                  "sweep": [1000, 4000, 16_000, 64_000, 256_000, 1 << 20, 1 << 22, 1 << 24], "embree_max": 1 << 24,
                  "fit_seconds": 25.0, "n_samples": 200_000, "grid_resolution": 128, "chunk": 1 << 21,
                  "compile": True, "capacities": True, "model": {}, "neural": {}},
-        "field_cost": {"points": 8192, "chunks": [64, 128, 256, 512, 1024, 4096], "gemm": 2048,
+        "field_cost": {"points": 8192, "chunks": [8, 16, 32, 64, 128, 256, 1024, 4096], "gemm": 2048,
                        "sdf_preset": "neural_sdf_tuned", "gan_preset": "gan_sdf_tuned"},
     },
     "small": {

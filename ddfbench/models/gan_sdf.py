@@ -2,9 +2,10 @@
 
 G: Linear(3->256) -> Conv1d(1,16,7) -> MaxPool1d(3,1) -> Tanh -> Conv1d(16,32,5) -> MaxPool1d(3,1)
    -> ReLU -> Linear(7744->1). D: the same on (x, y, z, sdf) with LeakyReLU(0.2) after the second
-   stage and a sigmoid output (thesis Appendix B). Evaluation runs eval_batch points per call (the
-   Conv1d stack is 1.7x slower a point at 1024 points a call than at 128 on one CPU thread,
-   reports/bench/field_cost; the SDF families otherwise pass 65,536 points).
+   stage and a sigmoid output (thesis Appendix B). Training runs the Conv1d modules; evaluation without
+   autograd (tracing, meshing) runs G as matrix products (ddfbench.models._gan_gemm, the same function to
+   float tolerance), eval_batch points per call: the rewrite is fastest at chunks that keep its buffers
+   in the core's cache (reports/bench/field_cost; the SDF families otherwise pass 65,536 points).
 
 Target scale: the thesis fits a bunny about 4 units long (its level-set grid spans 4.1 units,
 Appendix C); ours lives in the unit cube. G is trained on targets L = target_scale * sdf and
@@ -43,6 +44,7 @@ from torch import nn
 
 from ddfbench.errors import InputError
 from ddfbench.geometry import BOX_HALF
+from ddfbench.models import _gan_gemm as gan_gemm
 from ddfbench.models._sdf_family import NetSDFFamily
 from ddfbench.models.neural_sdf import clamped_l1
 from ddfbench.representation import Budget, FitData, FitStats, Probe
@@ -53,8 +55,7 @@ from ddfbench.train import Schedule, seed_everything, train_loop
 class ConvField(nn.Module):
     """The thesis' network: in_dim -> Linear 256 -> two Conv1d/MaxPool stages -> Linear(7744 -> 1) -> (M,).
 
-    Kept as torch's Conv1d: unfolded into matrix products (im2col) it measured 1.3-3x slower on our
-    CPU at every batch from 64 to 2048 points (the column copy costs more than the convolution).
+    Trained as torch's Conv1d modules; gan_gemm evaluates the generator's function without them.
     """
 
     def __init__(self, in_dim: int, first_act: nn.Module, second_act: nn.Module):
@@ -122,9 +123,15 @@ class GanSDF(NetSDFFamily):
         if self.scale <= 0 or self.eval_batch < 1:
             raise InputError(f"model.target_scale {self.scale} / eval_batch {self.eval_batch}: both must be > 0")
         self.net = generator().eval()
+        self._gemm: gan_gemm.GemmGenerator | None = None  # packed from self.net's weights when first evaluated
 
     def field(self, points: torch.Tensor) -> torch.Tensor:
-        """G in unit-cube units, eval_batch points per call (M, 3) -> (M,)."""
+        """G in unit-cube units, eval_batch points per call (M, 3) -> (M,). With autograd off (tracing,
+        meshing) as matrix products (ddfbench.models._gan_gemm: the same function to float tolerance, fewer
+        passes over memory); with it on (gradients of the field), through the Conv1d module."""
+        if not torch.is_grad_enabled():
+            self._gemm = gan_gemm.current(self._gemm, self.net)
+            return self._gemm(points, self.eval_batch).div_(self.scale)
         parts = [self.net(points[s : s + self.eval_batch]) for s in range(0, len(points), self.eval_batch)]
         return (torch.cat(parts) if parts else points.new_zeros(0)) / self.scale
 

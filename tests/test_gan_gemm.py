@@ -1,0 +1,62 @@
+"""The GAN generator's matrix-product evaluation (ddfbench.models._gan_gemm) is the Conv1d network's function."""
+
+import pytest
+import torch
+
+from ddfbench.models import _gan_gemm as gan_gemm, load_family
+from ddfbench.models.gan_sdf import discriminator, generator
+
+
+def _spread_generator(seed: int) -> torch.nn.Module:
+    """A generator with weights large enough that the pools and activations pick different winners per point."""
+    torch.manual_seed(seed)
+    net = generator().eval()
+    with torch.no_grad():
+        for p in net.parameters():
+            p.mul_(3.0)
+    return net
+
+
+def _no_forward(net: torch.nn.Module) -> None:
+    def refuse(*_args, **_kwargs):
+        raise AssertionError("the Conv1d module was called")
+    net.forward = refuse
+
+
+@pytest.mark.parametrize("chunk", [1, 7, 16, 500])
+def test_matrix_products_give_the_conv1d_networks_values(chunk):
+    net = _spread_generator(0)
+    points = (torch.rand(203, 3, generator=torch.Generator().manual_seed(1)) - 0.5) * 1.2
+    with torch.no_grad():
+        expected = net(points)
+    gemm = gan_gemm.GemmGenerator(net)
+    _no_forward(net)  # the values below come from the packed matrices alone
+    got = gemm(points, chunk)
+    assert got.shape == (203,)
+    assert expected.std() > 0.1  # the points are told apart: a constant answer would fail below
+    torch.testing.assert_close(got, expected, rtol=1e-5, atol=1e-5)
+    assert gemm(points[:0], chunk).shape == (0,)
+
+
+def test_the_family_field_repacks_when_weights_change_and_keeps_a_graph_when_asked():
+    rep = load_family("gan_sdf")({"eval_batch": 5, "target_scale": 4.0})
+    rep.net.load_state_dict(_spread_generator(2).state_dict())
+    points = torch.rand(40, 3) - 0.5
+    with torch.no_grad():
+        before = rep.field(points)
+        torch.testing.assert_close(before, rep.net(points) / 4.0, rtol=1e-5, atol=1e-6)
+        rep.net.head.bias.add_(1.0)  # an in-place change, as an optimizer step makes
+        torch.testing.assert_close(rep.field(points), before + 0.25, rtol=1e-5, atol=1e-5)
+        rep.net.load_state_dict(_spread_generator(3).state_dict())
+        torch.testing.assert_close(rep.field(points), rep.net(points) / 4.0, rtol=1e-5, atol=1e-6)
+    x = points.clone().requires_grad_(True)
+    value = rep.field(x)
+    (grad,) = torch.autograd.grad(value.sum(), x)
+    assert grad.abs().sum() > 0
+    with torch.no_grad():
+        torch.testing.assert_close(value.detach(), rep.field(points), rtol=1e-5, atol=1e-6)
+
+
+def test_only_the_generators_activations_are_packed():
+    with pytest.raises(TypeError, match="Tanh then ReLU"):
+        gan_gemm.GemmGenerator(discriminator(spectral=False))
