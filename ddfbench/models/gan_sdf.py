@@ -51,6 +51,8 @@ from ddfbench.representation import Budget, FitData, FitStats, Probe
 from ddfbench.trace import autograd_normals
 from ddfbench.train import Schedule, seed_everything, train_loop
 
+GRAD_BATCH = 128  # fewest points a call through the Conv1d modules: they slow below ~128 (reports/bench/field_cost)
+
 
 class ConvField(nn.Module):
     """The thesis' network: in_dim -> Linear 256 -> two Conv1d/MaxPool stages -> Linear(7744 -> 1) -> (M,).
@@ -109,7 +111,7 @@ def near_surface_term(pred: torch.Tensor, target: torch.Tensor, reading: str) ->
 
 class GanSDF(NetSDFFamily):
     """cfg: w_mse, w_near, near_term, w_adv, adversarial, target_scale, epochs, w_anchor, spectral_norm, w_gp,
-    lr, lr_d, betas, batch, eval_batch, grad_clip, lr_schedule/lr_final_ratio/lr_warmup, trace."""
+    lr, lr_d, betas, batch, eval_batch (points a matrix-product call), grad_clip, lr_schedule/lr_final_ratio/lr_warmup, trace."""
 
     family = "gan_sdf"
     sample_kind = "sdf"
@@ -119,25 +121,26 @@ class GanSDF(NetSDFFamily):
         near_surface_term(torch.zeros(1), torch.zeros(1), str(self.cfg.get("near_term", "exp")))  # validates
         adversarial_losses(str(self.cfg.get("adversarial", "least_squares")))  # validates
         self.scale = float(self.cfg.get("target_scale", 1.0))
-        self.eval_batch = int(self.cfg.get("eval_batch", 128))
+        self.eval_batch = int(self.cfg.get("eval_batch", 16))
+        self.grad_batch = max(self.eval_batch, GRAD_BATCH)
         if self.scale <= 0 or self.eval_batch < 1:
             raise InputError(f"model.target_scale {self.scale} / eval_batch {self.eval_batch}: both must be > 0")
         self.net = generator().eval()
         self._gemm: gan_gemm.GemmGenerator | None = None  # packed from self.net's weights when first evaluated
 
     def field(self, points: torch.Tensor) -> torch.Tensor:
-        """G in unit-cube units, eval_batch points per call (M, 3) -> (M,). With autograd off (tracing,
-        meshing) as matrix products (ddfbench.models._gan_gemm: the same function to float tolerance, fewer
-        passes over memory); with it on (gradients of the field), through the Conv1d module."""
+        """G in unit-cube units (M, 3) -> (M,). With autograd off (tracing, meshing) as matrix products,
+        eval_batch points a call (ddfbench.models._gan_gemm: the same function to float tolerance); with it
+        on (gradients of the field), through the Conv1d module, grad_batch points a call."""
         if not torch.is_grad_enabled():
             self._gemm = gan_gemm.current(self._gemm, self.net)
             return self._gemm(points, self.eval_batch).div_(self.scale)
-        parts = [self.net(points[s : s + self.eval_batch]) for s in range(0, len(points), self.eval_batch)]
+        parts = [self.net(points[s : s + self.grad_batch]) for s in range(0, len(points), self.grad_batch)]
         return (torch.cat(parts) if parts else points.new_zeros(0)) / self.scale
 
     def surface_normals(self, points: torch.Tensor):
-        """Autograd normals, eval_batch points per backward pass; one evaluation and one backward per point."""
-        parts = [autograd_normals(self.net, points[s : s + self.eval_batch]) for s in range(0, len(points), self.eval_batch)]
+        """Autograd normals, grad_batch points per backward pass; one evaluation and one backward per point."""
+        parts = [autograd_normals(self.net, points[s : s + self.grad_batch]) for s in range(0, len(points), self.grad_batch)]
         if not parts:
             return points.new_zeros((0, 3)), points.new_zeros(0, dtype=torch.bool), 0, 0
         m = int(points.shape[0])
