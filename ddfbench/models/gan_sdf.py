@@ -51,7 +51,8 @@ from ddfbench.representation import Budget, FitData, FitStats, Probe
 from ddfbench.trace import autograd_normals
 from ddfbench.train import Schedule, seed_everything, train_loop
 
-GRAD_BATCH = 128  # fewest points a call through the Conv1d modules: they slow below ~128 (reports/bench/field_cost)
+GRAD_BATCH = 128  # fewest points a call through the Conv1d modules: their forward is fastest at 128-256 a call
+                  # (reports/bench/field_cost, no grad; autograd passes not timed there)
 
 
 class ConvField(nn.Module):
@@ -126,15 +127,14 @@ class GanSDF(NetSDFFamily):
         if self.scale <= 0 or self.eval_batch < 1:
             raise InputError(f"model.target_scale {self.scale} / eval_batch {self.eval_batch}: both must be > 0")
         self.net = generator().eval()
-        self._gemm: gan_gemm.GemmGenerator | None = None  # packed from self.net's weights when first evaluated
+        self._gemm = gan_gemm.GemmGenerator()  # evaluates self.net without autograd; holds its buffers
 
     def field(self, points: torch.Tensor) -> torch.Tensor:
         """G in unit-cube units (M, 3) -> (M,). With autograd off (tracing, meshing) as matrix products,
         eval_batch points a call (ddfbench.models._gan_gemm: the same function to float tolerance); with it
         on (gradients of the field), through the Conv1d module, grad_batch points a call."""
         if not torch.is_grad_enabled():
-            self._gemm = gan_gemm.current(self._gemm, self.net)
-            return self._gemm(points, self.eval_batch).div_(self.scale)
+            return self._gemm(self.net, points, self.eval_batch).div_(self.scale)
         parts = [self.net(points[s : s + self.grad_batch]) for s in range(0, len(points), self.grad_batch)]
         return (torch.cat(parts) if parts else points.new_zeros(0)) / self.scale
 
