@@ -59,16 +59,26 @@ def test_the_family_field_follows_every_change_of_the_weights_and_keeps_a_graph_
         torch.testing.assert_close(rep.field(points), before, rtol=1e-5, atol=1e-6)
     with torch.no_grad():  # buffers first made under inference mode are still writable here
         torch.testing.assert_close(rep.field(points), before, rtol=1e-5, atol=1e-6)
+    # weights the packing copies (not the biases it reads live): in place, then through .data
+    for change in (lambda: rep.net.conv2.weight.mul_(1.5), lambda: rep.net.lift.weight.data.mul_(0.5)):
+        with torch.no_grad():
+            change()
+            changed = _spread_generator(2)
+            changed.load_state_dict(rep.net.state_dict())
+            torch.testing.assert_close(rep.field(points), changed(points) / 4.0, rtol=1e-5, atol=1e-6)
     rep.net.forward = forward
     x = points.clone().requires_grad_(True)
     value = rep.field(x)
     (grad,) = torch.autograd.grad(value.sum(), x)
     assert grad.abs().sum() > 0
-    torch.testing.assert_close(value.detach(), before, rtol=1e-5, atol=1e-6)
+    with torch.no_grad():
+        torch.testing.assert_close(value.detach(), rep.field(points), rtol=1e-5, atol=1e-6)
 
 
-def test_only_the_generators_stack_is_packed():
+def test_only_the_generators_stack_is_packed_and_a_chunk_holds_a_point():
     points = torch.zeros(3, 3)
+    with pytest.raises(ValueError, match="chunk 0"):
+        gan_gemm.GemmGenerator()(generator(), points, 0)
     with pytest.raises(ValueError, match="Tanh then ReLU"):
         gan_gemm.GemmGenerator()(discriminator(spectral=False), torch.zeros(3, 4), 2)
     padded = generator()

@@ -127,6 +127,8 @@ class GemmGenerator:
     def __call__(self, net: nn.Module, points: torch.Tensor, chunk: int) -> torch.Tensor:
         """net at points (M, 3) -> (M,), `chunk` (>= 1) points a matrix product; points on net's device and
         of its dtype."""
+        if chunk < 1:
+            raise ValueError(f"GemmGenerator: chunk {chunk}: must be >= 1 point a call")
         with torch.no_grad():
             out = points.new_empty(points.shape[0])
             if not len(points):

@@ -51,8 +51,8 @@ from ddfbench.representation import Budget, FitData, FitStats, Probe
 from ddfbench.trace import autograd_normals
 from ddfbench.train import Schedule, seed_everything, train_loop
 
-GRAD_BATCH = 128  # fewest points a call through the Conv1d modules: their forward is fastest at 128-256 a call
-                  # (reports/bench/field_cost, no grad; autograd passes not timed there)
+GRAD_BATCH = 128  # fewest points a call through the Conv1d modules: their forward is fastest at 64-256 a call,
+                  # by the run (reports/bench/field_cost and its repeats, no grad; autograd passes not timed there)
 
 
 class ConvField(nn.Module):
