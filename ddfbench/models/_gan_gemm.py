@@ -72,7 +72,7 @@ def _check_structure(net: nn.Module) -> None:
 
 
 class _Views:
-    """The in-place views of one chunk of b points over the buffers, sliced once: y (b, L1*C1); each pool's
+    """The in-place views of one chunk of b points over the buffers, sliced once a call: y (b, L1*C1); each pool's
     row-shifted sources and destination; conv2's shifted inputs; the head's per-point blocks (b, L2'*C2)
     with a row stride of L1*C2."""
 
@@ -104,8 +104,9 @@ class GemmGenerator:
 
     def _buffers_for(self, packed: _Packed, points: int, device: torch.device, dtype: torch.dtype) -> dict:
         capacity, old_device, old_dtype = self._key or (0, None, None)
-        if points > capacity or (device, dtype) != (old_device, old_dtype):
-            capacity = points if (device, dtype) != (old_device, old_dtype) else max(points, capacity)
+        same_kind = (device, dtype) == (old_device, old_dtype)
+        if not same_kind or points > capacity:
+            capacity = max(points, capacity) if same_kind else points
             self._buffers = {}  # the old ones go before the new ones are allocated
             with torch.inference_mode(False):  # plain tensors: written in place under no_grad or inference mode
                 self._buffers = {k: torch.empty(s, device=device, dtype=dtype)
