@@ -17,7 +17,7 @@ from typing import Any, Mapping
 import numpy as np
 import torch
 
-from ddfbench import plugins, runs
+from ddfbench import heap, plugins, runs
 from ddfbench.budget import fit_limit, fit_record
 from ddfbench.checkpoint import FILE as CHECKPOINT_FILE, Checkpoint, code_fingerprint
 from ddfbench.errors import InputError
@@ -188,6 +188,7 @@ def run(cfg: Mapping[str, Any], choices: Mapping[str, str] | None = None,
         Checkpoint(os.path.join(rdir, CHECKPOINT_FILE)).remove()
     seed = int(cfg.get("seed", 0))
     threads = _set_threads(int(cfg.get("threads", 0)))
+    heap.keep_freed_blocks()  # CPU fits reuse their multi-MB activations (ddfbench.heap)
     scene = dict(cfg.get("scene") or {})
     out: dict[str, Any] = {
         "schema_version": runs.SCHEMA_VERSION, "key": key, "status": "failed", "error": None,
