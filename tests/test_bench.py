@@ -4,6 +4,7 @@ positive and consistent with the figures beside them. No timing assertions."""
 import importlib.util
 import json
 import math
+import sys
 import time
 
 import pytest
@@ -63,6 +64,9 @@ def test_each_issue_comparison_is_present(small_run):
                                       f"generator through its Conv1d module, {c} points a call" for c in (64, 256)]
     assert all(r.endswith("neural_sdf_tuned field, 65536 points a call, points/s") for r in rows["field_cost"][2:4])
     assert all("dense fp32 matrix product" in r for r in rows["field_cost"][4:]) and len(rows["field_cost"]) == 6
+    assert rows["gan_train"] == ["gan_sdf G+D forward and backward, batch 16, pools as Stride1MaxPool1d: samples/s | "
+                                 "the same pass with torch's nn.MaxPool1d, samples/s"]
+    assert doc["env"]["glibc_heap_kept"] is sys.platform.startswith("linux")
     assert not any(": sampling seconds" in r for r in rows["end_to_end"])  # the small run is a mesh: no samples
 
 

@@ -53,3 +53,16 @@ def test_gan_step_gradients_equal_torch_pools():
     for (name, p), q in zip([*g.named_parameters(), *d.named_parameters()],
                             [*g_ref.parameters(), *d_ref.parameters()]):
         assert torch.equal(p.grad, q.grad), name
+
+
+def test_bench_passes_compute_the_same_gradients():
+    """The bench's two ways (ddfbench.bench.gan_train) differ only in the pools: the same weights and gradients."""
+    from ddfbench.bench.gan_train import training_pass
+
+    grads = []
+    for torch_pools in (False, True):
+        run, nets = training_pass(32, torch_pools, "cpu")
+        run()
+        grads.append([p.grad.clone() for net in nets for p in net.parameters()])
+    assert len(grads[0]) == len(grads[1]) > 0
+    assert all(torch.equal(a, b) for a, b in zip(*grads))

@@ -13,10 +13,12 @@ same process (DESIGN.md, timing rules). One module per section:
                 each with its accuracy; ray-count sweep; the four DDF capacities (run by default on CUDA only)
 10. field_cost  points/s of the GAN-SDF generator per eval chunk vs the neural SDF's field, and each
                 network's GFLOP/s vs a dense matrix product
+11. gan_train   the thesis GAN's G+D forward and backward with the family's max pools vs torch's MaxPool1d
 
 Each section module has `run(ctx: Context) -> SectionResult`; timing.py measures, results.py holds
 the rows, sizes.py the problem sizes, table.py writes the outputs.
 """
 
-SECTIONS = ("sampling", "oracle", "ddf", "tracing", "grid", "metrics", "training", "end_to_end", "race", "field_cost")
+SECTIONS = ("sampling", "oracle", "ddf", "tracing", "grid", "metrics", "training", "end_to_end", "race", "field_cost",
+            "gan_train")
 CUDA_ONLY_BY_DEFAULT = ("race",)  # left out of a --device cpu run unless --only names it

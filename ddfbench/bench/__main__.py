@@ -18,6 +18,7 @@ import time
 
 import torch
 
+from ddfbench import heap
 from ddfbench.bench import CUDA_ONLY_BY_DEFAULT, SECTIONS
 from ddfbench.bench.context import Context
 from ddfbench.bench.results import SectionResult
@@ -85,6 +86,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.threads:
         torch.set_num_threads(args.threads)
     threads = torch.get_num_threads()
+    heap_kept = heap.keep_freed_blocks()  # as a run sets it (ddfbench.runner)
     started, t0 = dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds"), time.perf_counter()
     load = round(os.getloadavg()[0], 2) if hasattr(os, "getloadavg") else None
     results: dict[str, SectionResult] = {}
@@ -101,7 +103,7 @@ def main(argv: list[str] | None = None) -> int:
         "started": started, "total_s": time.perf_counter() - t0, "load_average_start": load,
         "options": {"device": device, "sizes": args.sizes, "repeats": args.repeats, "warmup": args.warmup,
                     "sections": sections, "oracle_backend": args.oracle_backend},
-        "env": environment(device, threads),
+        "env": {**environment(device, threads), "glibc_heap_kept": heap_kept},
         "sizes": {name: SIZES[args.sizes][name] for name in sections},
         "sections": {name: r.as_dict() for name, r in results.items()},
     }

@@ -24,6 +24,7 @@ SIZES: dict[str, dict[str, dict]] = {
                  "compile": True, "capacities": True, "model": {}, "neural": {}},
         "field_cost": {"points": 8192, "chunks": [8, 16, 32, 64, 128, 256, 1024, 4096], "gemm": 2048,
                        "sdf_preset": "neural_sdf_tuned", "gan_preset": "gan_sdf_tuned"},
+        "gan_train": {"batch": 1024},  # the thesis preset's batch
     },
     "small": {
         "sampling": {"shape": "sphere", "face_mode": "total", "s_fc": 1, "s_dr": 2, "s_p": 2, "bare_rays": 20_000},
@@ -45,5 +46,6 @@ SIZES: dict[str, dict[str, dict]] = {
                  "capacities": True, "model": {"batch": 256}, "neural": {"width": 16, "depth": 2, "batch": 256}},
         "field_cost": {"points": 256, "chunks": [64, 256], "gemm": 128,
                        "sdf_preset": "neural_sdf_tuned", "gan_preset": "gan_sdf_tuned"},
+        "gan_train": {"batch": 16},
     },
 }
