@@ -1,18 +1,19 @@
 """glibc heap settings for CPU runs: freed multi-MB tensors stay in the process for the next step to reuse.
 
-torch's CPU allocator hands every tensor back to malloc. glibc serves blocks over its mmap threshold with
-fresh mmap pages and unmaps them on free, so a training step that makes the same 16-32 MB activations each
-step page-faults them in again every time. Raising the threshold to its 32 MiB maximum, with a large trim
-threshold and top pad, keeps those blocks in the heap. Measured on one thread of a 2-core Xeon: the thesis
-GAN's training step (G and D, batch 1024, the pools of ddfbench.models._stride1_pool) took 0.96 s a step
-with glibc's defaults and 0.81-0.89 s with these (two runs each; issue 15's note gives the script).
-Elsewhere (macOS, musl) nothing changes.
+torch's CPU allocator hands every tensor back to malloc. By default glibc serves blocks over its mmap
+threshold (128 KiB at start, raised to the largest freed mapped block, at most 32 MiB) with fresh mmap pages,
+and returns the heap's free top to the OS once it exceeds the trim threshold (twice the mmap threshold), so
+a training step's 16-32 MB activations can be page-faulted in again. These settings fix the mmap threshold
+at its 32 MiB maximum, raise the trim threshold to 1 GiB and pad each heap growth by 256 MiB: a process
+may keep up to ~1.25 GiB of freed memory. Measured on the thesis GAN's training step (batch 1024, one thread
+of a 2-core Xeon, reports/bench/gan_train/README.md): 0.96 s a step with glibc's defaults against 0.81-0.89 s
+on an idle machine, 1.48-1.74 s against 1.29-1.53 s beside a 2-thread fit (~10 %). Elsewhere than glibc
+nothing changes.
 """
 
 from __future__ import annotations
 
 import ctypes
-import ctypes.util
 
 MMAP_THRESHOLD_B = 32 * 2**20   # glibc's largest allowed M_MMAP_THRESHOLD on 64-bit
 TRIM_THRESHOLD_B = 2**30        # free heap top kept before glibc returns it to the OS
@@ -21,10 +22,14 @@ _M_TRIM_THRESHOLD, _M_TOP_PAD, _M_MMAP_THRESHOLD = -1, -2, -3  # <malloc.h>
 
 
 def keep_freed_blocks() -> bool:
-    """Set glibc's mmap/trim thresholds and top pad for this process; False where malloc is not glibc's."""
-    name = ctypes.util.find_library("c")
-    libc = ctypes.CDLL(name) if name else None
-    if libc is None or not hasattr(libc, "mallopt") or not hasattr(libc, "gnu_get_libc_version"):
+    """Set glibc's mmap and trim thresholds and top pad for this process; True when all three took,
+    False where malloc is not glibc's (the process's own symbols lack gnu_get_libc_version)."""
+    try:
+        libc = ctypes.CDLL(None)
+    except OSError:
         return False
-    return all(libc.mallopt(option, value) == 1 for option, value in (
-        (_M_MMAP_THRESHOLD, MMAP_THRESHOLD_B), (_M_TRIM_THRESHOLD, TRIM_THRESHOLD_B), (_M_TOP_PAD, TOP_PAD_B)))
+    if not hasattr(libc, "mallopt") or not hasattr(libc, "gnu_get_libc_version"):
+        return False
+    took = [libc.mallopt(option, value) == 1 for option, value in (
+        (_M_MMAP_THRESHOLD, MMAP_THRESHOLD_B), (_M_TRIM_THRESHOLD, TRIM_THRESHOLD_B), (_M_TOP_PAD, TOP_PAD_B))]
+    return all(took)

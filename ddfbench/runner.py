@@ -188,7 +188,7 @@ def run(cfg: Mapping[str, Any], choices: Mapping[str, str] | None = None,
         Checkpoint(os.path.join(rdir, CHECKPOINT_FILE)).remove()
     seed = int(cfg.get("seed", 0))
     threads = _set_threads(int(cfg.get("threads", 0)))
-    heap.keep_freed_blocks()  # CPU fits reuse their multi-MB activations (ddfbench.heap)
+    heap_kept = heap.keep_freed_blocks()  # CPU fits reuse their multi-MB activations (ddfbench.heap)
     scene = dict(cfg.get("scene") or {})
     out: dict[str, Any] = {
         "schema_version": runs.SCHEMA_VERSION, "key": key, "status": "failed", "error": None,
@@ -204,7 +204,7 @@ def run(cfg: Mapping[str, Any], choices: Mapping[str, str] | None = None,
         device = resolve_device(device or str(cfg.get("train", {}).get("device", "cpu")))
         if device.startswith("cuda"):
             strict_fp32()  # a CUDA record computes in float32, as a CPU one
-        out["env"] = runs.environment(device, threads)
+        out["env"] = {**runs.environment(device, threads), "glibc_heap_kept": heap_kept}
         if bad_level is not None:
             raise bad_level
         seed_everything(seed)  # a reused worker process starts each run from the same state

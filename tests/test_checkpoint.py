@@ -3,6 +3,7 @@ ends (weights, loss curve, probes), for every learned family and through the run
 other code or of another fit is not loaded."""
 
 import os
+import platform
 import signal
 import subprocess
 import sys
@@ -194,4 +195,5 @@ def test_a_run_that_fails_after_its_fit_keeps_the_checkpoint_and_its_rerun_does_
     assert [f for _, _, files in os.walk(tmp_path) for f in files if f == FILE]
     rerun = runner.run(cfg)
     assert rerun["status"] == "ok" and rerun["fit"]["resumed_at"] == [40]
+    assert rerun["env"]["glibc_heap_kept"] is (platform.libc_ver()[0] == "glibc")  # the record says how it ran
     assert not [f for _, _, files in os.walk(tmp_path) for f in files if f == FILE]

@@ -5,7 +5,7 @@ import torch
 import torch.nn.functional as F
 
 from ddfbench.models._stride1_pool import Stride1MaxPool1d
-from ddfbench.models.gan_sdf import discriminator, generator
+from ddfbench.models.gan_sdf import discriminator
 
 
 @pytest.mark.parametrize("window", [2, 3, 5])
@@ -33,30 +33,9 @@ def test_plain_forward_without_autograd():
     assert y.grad_fn is None and torch.equal(y, F.max_pool1d(h.detach(), 3, 1))
 
 
-def test_gan_step_gradients_equal_torch_pools():
-    """One thesis loss through G and D: every parameter's gradient equals the same networks with nn.MaxPool1d."""
-    torch.manual_seed(0)
-    g, d = generator(), discriminator(False)
-    g_ref, d_ref = generator(), discriminator(False)
-    g_ref.load_state_dict(g.state_dict())
-    d_ref.load_state_dict(d.state_dict())
-    for net in (g_ref, d_ref):
-        net.pool = torch.nn.MaxPool1d(3, stride=1)
-    x, target = torch.rand(64, 3) - 0.5, torch.randn(64)
-
-    def loss(gen, disc):
-        pred = gen(x)
-        return (pred - target).pow(2).mean() + torch.sigmoid(disc(torch.cat([x, pred[:, None]], 1))).mean()
-
-    loss(g, d).backward()
-    loss(g_ref, d_ref).backward()
-    for (name, p), q in zip([*g.named_parameters(), *d.named_parameters()],
-                            [*g_ref.parameters(), *d_ref.parameters()]):
-        assert torch.equal(p.grad, q.grad), name
-
-
-def test_bench_passes_compute_the_same_gradients():
-    """The bench's two ways (ddfbench.bench.gan_train) differ only in the pools: the same weights and gradients."""
+def test_gan_pass_gradients_equal_torch_pools():
+    """The bench's thesis pass through G and D (ddfbench.bench.gan_train): every parameter's gradient equals
+    the same networks' with nn.MaxPool1d, so the bench times the same work both ways."""
     from ddfbench.bench.gan_train import training_pass
 
     grads = []
@@ -65,4 +44,20 @@ def test_bench_passes_compute_the_same_gradients():
         run()
         grads.append([p.grad.clone() for net in nets for p in net.parameters()])
     assert len(grads[0]) == len(grads[1]) > 0
+    assert all(torch.equal(a, b) for a, b in zip(*grads))
+
+
+def test_double_backward_equals_torch():
+    """The R1 penalty (model.w_gp) differentiates D's input gradient: D's parameter gradients match torch's."""
+    grads = []
+    for torch_pools in (False, True):
+        torch.manual_seed(0)
+        d = discriminator(False)
+        if torch_pools:
+            d.pool = torch.nn.MaxPool1d(3, stride=1)
+        real = torch.cat([torch.rand(48, 3) - 0.5, torch.randn(48, 1)], 1).requires_grad_()
+        (grad,) = torch.autograd.grad(d(real).sum(), real, create_graph=True)
+        grad.pow(2).sum(1).mean().backward()
+        grads.append([p.grad for p in d.parameters() if p.grad is not None])  # not the head's bias
+    assert len(grads[0]) == len(grads[1]) >= 7
     assert all(torch.equal(a, b) for a, b in zip(*grads))

@@ -1,11 +1,11 @@
 """Section 11, GAN training pass: the thesis generator and discriminator's forward and backward with the max
 pools as the family trains them (ddfbench.models._stride1_pool) against torch's nn.MaxPool1d, side by side.
 
-One pass, as a thesis step computes it without the optimizers: P = G(x) on `batch` random points; D on the
-real (x, L) and the detached fake (x, P) with the least-squares discriminator loss, backward; then the
-generator's MSE plus adversarial term through D on (x, P), backward. The two network pairs hold the same
-weights, so both ways compute the same gradients (tests/test_stride1_pool.py) and the ratio is the pools'
-share of a step. Passes/s x batch = samples/s. Sizes: batch.
+One pass, the network work of a thesis step without its optimizers and near-surface term: P = G(x) on `batch`
+random points; D on the real (x, L) and the detached fake (x, P) with the least-squares discriminator loss,
+backward; then the generator's MSE plus adversarial term through D on (x, P), backward. The two network pairs
+hold the same weights, so both ways compute the same gradients (tests/test_stride1_pool.py) and the ratio is
+the speed-up the pools give the pass. Passes/s x batch = samples/s. Sizes: batch.
 """
 
 from __future__ import annotations

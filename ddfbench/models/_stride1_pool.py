@@ -1,15 +1,19 @@
 """A stride-1 max pool whose backward pass is cheap on CPU, with torch's values and gradients bit for bit.
 
 torch's MaxPool1d, when its input needs a gradient, writes an int64 index per output (2x the output's
-bytes, fresh pages every call) and on one CPU thread took 80 ms (16 x 250 channels) and 150 ms (32 x 244)
-forward and backward at the GAN's batch of 1024 points, over half of a thesis training step. This pool runs
+bytes); in a profile of the thesis GAN's training step (batch 1024, one CPU thread) its forward took 54 % of
+the step and its backward another 8 % (reports/bench/gan_train/README.md). This pool runs
 torch's plain forward (no indices), keeps its input and output, and in the backward pass finds each window's
 first maximum again by comparison: the tap i that holds it takes the window's gradient, as in torch's
 kernel, which also gives ties to the first maximum. The gradient an input element gets from its up-to-
 `window` windows is summed in torch's order (window by window, left to right), so the sums round alike.
 
-A window holding a NaN: torch passes its gradient to the NaN; here it goes to the window's last tap
-(training stops on a non-finite loss first; ddfbench.train's NaN guard).
+The backward is written in differentiable ops (masks times the incoming gradient), so a double backward
+(the GAN's R1 penalty, model.w_gp) matches torch's too. Where they differ: a window holding a NaN (torch
+passes its gradient to the NaN, here the window's last tap takes it) and an infinite incoming gradient
+(inf x 0 makes NaN beside it); training stops on either first (ddfbench.train's NaN guard). An in-place
+operation on the pool's output raises, as the output is kept for the backward. Off CPU (not measured there)
+and without autograd the pool is torch's own.
 """
 
 from __future__ import annotations
@@ -33,33 +37,28 @@ class _FirstMaxGrad(torch.autograd.Function):
     def backward(ctx, grad_out: torch.Tensor):
         h, y = ctx.saved_tensors
         k, n = ctx.window, y.shape[-1]
-        taken = None   # (N, C, n) bool: the window's maximum found at an earlier tap
-        per_tap = []   # gradient of taps 0 .. k-2, each (N, C, n)
+        free = torch.ones_like(y, dtype=torch.bool)  # (N, C, n): no earlier tap holds the window's maximum
+        per_tap = []  # (N, C, n) each: the window gradients that taps 0 .. k-2 take
         for i in range(k - 1):
-            at_i = torch.eq(h[..., i : i + n], y)
-            if taken is not None:
-                at_i.logical_and_(taken.logical_not())
-                taken.logical_or_(at_i)
-            else:
-                taken = at_i.clone()
+            at_i = torch.eq(h[..., i : i + n], y).logical_and_(free)
+            free.logical_and_(at_i.logical_not())
             per_tap.append(grad_out * at_i)
         grad_in = torch.empty_like(h)
         grad_in[..., : k - 1] = 0
-        last = grad_in[..., k - 1 :].copy_(grad_out)
-        for g in per_tap:  # exactly one tap holds the window's gradient: go - go = 0 and go - 0 = go exactly
-            last.sub_(g)
+        grad_in[..., k - 1 :] = grad_out * free
         for i in range(k - 2, -1, -1):  # element j sums windows j-k+1 .. j in that order, as torch's kernel
             grad_in[..., i : i + n] += per_tap[i]
         return grad_in, None
 
 
 class Stride1MaxPool1d(nn.MaxPool1d):
-    """nn.MaxPool1d(window, stride=1) (no padding), the same values and gradients; faster backward on CPU."""
+    """nn.MaxPool1d(window, stride=1) (no padding), (N, C, L) -> (N, C, L - window + 1): the same values and
+    gradients, a faster backward on CPU."""
 
     def __init__(self, window: int):
         super().__init__(window, stride=1)
 
     def forward(self, h: torch.Tensor) -> torch.Tensor:
-        if torch.is_grad_enabled() and h.requires_grad:
+        if torch.is_grad_enabled() and h.requires_grad and h.device.type == "cpu":
             return _FirstMaxGrad.apply(h, int(self.kernel_size))
         return F.max_pool1d(h, self.kernel_size, 1)
