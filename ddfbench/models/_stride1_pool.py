@@ -8,8 +8,9 @@ first maximum again by comparison: the tap i that holds it takes the window's gr
 kernel, which also gives ties to the first maximum. The gradient an input element gets from its up-to-
 `window` windows is summed in torch's order (window by window, left to right), so the sums round alike.
 
-The backward is written in differentiable ops (masks times the incoming gradient), so a double backward
-(the GAN's R1 penalty, model.w_gp) matches torch's too. Where they differ: a window holding a NaN (torch
+Under create_graph the backward is written as masks times the incoming gradient, so a double backward
+(the GAN's R1 penalty, model.w_gp) matches torch's too; otherwise the last tap's share is the incoming
+gradient less the other taps' (exact, fewer passes). Where they differ: a window holding a NaN (torch
 passes its gradient to the NaN, here the window's last tap takes it) and an infinite incoming gradient
 (inf x 0 makes NaN beside it); training stops on either first (ddfbench.train's NaN guard). An in-place
 operation on the pool's output raises, as the output is kept for the backward. Off CPU (not measured there)
@@ -45,7 +46,12 @@ class _FirstMaxGrad(torch.autograd.Function):
             per_tap.append(grad_out * at_i)
         grad_in = torch.empty_like(h)
         grad_in[..., : k - 1] = 0
-        grad_in[..., k - 1 :] = grad_out * free
+        if torch.is_grad_enabled():  # create_graph: a double backward differentiates this, so masks only
+            grad_in[..., k - 1 :] = grad_out * free
+        else:  # one tap holds each window's gradient: go - go = 0 and go - 0 = go exactly, and cheaper
+            last = grad_in[..., k - 1 :].copy_(grad_out)
+            for g in per_tap:
+                last.sub_(g)
         for i in range(k - 2, -1, -1):  # element j sums windows j-k+1 .. j in that order, as torch's kernel
             grad_in[..., i : i + n] += per_tap[i]
         return grad_in, None
