@@ -5,10 +5,9 @@ threshold (128 KiB at start, raised to the largest freed mapped block, at most 3
 and returns the heap's free top to the OS once it exceeds the trim threshold (twice the mmap threshold), so
 a training step's 16-32 MB activations can be page-faulted in again. These settings fix the mmap threshold
 at its 32 MiB maximum, raise the trim threshold to 1 GiB and pad each heap growth by 256 MiB: a process
-may keep up to ~1.25 GiB of freed memory. Measured on the thesis GAN's training step (batch 1024, one thread
-of a 2-core Xeon, reports/bench/gan_train/README.md): 0.96 s a step with glibc's defaults against 0.81-0.89 s
-on an idle machine, 1.48-1.74 s against 1.29-1.53 s beside a 2-thread fit (~10 %). Elsewhere than glibc
-nothing changes.
+may keep up to ~1.25 GiB of freed memory. Measured on the thesis GAN's training step (batch 1024, the
+family's pools, the idle 2-core Xeon; reports/bench/gan_train/README.md): 1.193 s a step with glibc's
+defaults against 1.021 s on one thread, 0.645 against 0.608 s on two. Elsewhere than glibc nothing changes.
 """
 
 from __future__ import annotations
