@@ -128,13 +128,17 @@ def _git(*args: str) -> str | None:
         return None
 
 
+GIT_SHA_ENV = "DDFBENCH_GIT_SHA"  # names the commit of a copy of the tree without .git (a lent GPU machine)
+
+
 def _git_sha() -> str | None:
-    return _git("rev-parse", "HEAD")
+    return _git("rev-parse", "HEAD") or os.environ.get(GIT_SHA_ENV)
 
 
 def code_sha() -> str | None:
-    """The last commit that changed the code (CODE_PATHS): committing reports midway leaves it unchanged."""
-    return _git("log", "-1", "--format=%H", "--", *CODE_PATHS)
+    """The last commit that changed the code (CODE_PATHS): committing reports midway leaves it unchanged.
+    In a copy without .git, $DDFBENCH_GIT_SHA (whoever copies the tree names a commit that changed the code)."""
+    return _git("log", "-1", "--format=%H", "--", *CODE_PATHS) or os.environ.get(GIT_SHA_ENV)
 
 
 OPTIONAL = ("open3d", "warp", "pymeshlab", "embreex")  # modules whose versions are recorded; a GPU machine may lack some

@@ -203,3 +203,29 @@ def test_flops_per_point_counts_linear_and_conv_multiply_adds():
     # k 5 (244 out); pool 3 (242); Linear 32*242 -> 1
     macs = 3 * 256 + 16 * 250 * 7 + 32 * 244 * 16 * 5 + 32 * 242
     assert flops_per_point(generator()) == 2 * macs
+
+
+def test_a_section_stopped_by_sigterm_keeps_what_it_measured(tmp_path, monkeypatch):
+    """A timeout's SIGTERM during the race's capacities: the report is still written, with the rows of the
+    ray sets and the sweep measured before it, the error saying it was stopped, and the sections after it not run."""
+    import os
+    import signal
+
+    from ddfbench.bench import race
+
+    def stopped(*args, **kwargs):
+        os.kill(os.getpid(), signal.SIGTERM)
+        time.sleep(5)  # the handler raises here
+        raise AssertionError("SIGTERM was not turned into an exception")
+
+    monkeypatch.setattr(race, "capacities", stopped)
+    before = signal.getsignal(signal.SIGTERM)
+    assert main(["--sizes", "small", "--only", "metrics,race,gan_train", "--repeats", "1", "--out", str(tmp_path)]) == 1
+    assert signal.getsignal(signal.SIGTERM) is before
+    doc = json.loads((tmp_path / "bench-cpu-small.json").read_text())
+    section = doc["sections"]["race"]
+    assert section["error"].startswith("Stopped: SIGTERM")
+    measures = [row["measure"] for row in section["rows"]]
+    assert any(m.startswith("primary:") for m in measures) and any(m.startswith("sweep ") for m in measures)
+    assert not any(m.startswith("capacity") for m in measures)
+    assert doc["sections"]["metrics"]["rows"] and "gan_train" not in doc["sections"]

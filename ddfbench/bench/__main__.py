@@ -12,6 +12,7 @@ import argparse
 import datetime as dt
 import importlib
 import os
+import signal
 import sys
 import tempfile
 import time
@@ -37,14 +38,25 @@ def parse_sections(text: str) -> list[str]:
     return [s for s in SECTIONS if s in names]
 
 
+class Stopped(Exception):
+    """SIGTERM arrived (a timeout, a job scheduler): the section stops, and what it measured is written."""
+
+
+def _stop(signum, frame) -> None:
+    raise Stopped("SIGTERM: the bench was stopped midway")
+
+
 def run_section(name: str, ctx: Context) -> SectionResult:
-    """One section; an exception becomes a failed SectionResult with a one-line error."""
+    """One section; an exception becomes a failed SectionResult with a one-line error, holding the rows
+    and details the section had put in ctx.partial before it failed."""
     start = time.perf_counter()
+    ctx.partial = None
     try:
         result = importlib.import_module(f"ddfbench.bench.{name}").run(ctx)
     except Exception as err:  # the other sections still run; the exit code says something failed
         first = (str(err).strip().splitlines() or [""])[0]
-        result = SectionResult(error=f"{type(err).__name__}: {first}")
+        result = ctx.partial or SectionResult()
+        result.error = f"{type(err).__name__}: {first}"
     result.seconds = time.perf_counter() - start
     return result
 
@@ -90,14 +102,20 @@ def main(argv: list[str] | None = None) -> int:
     started, t0 = dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds"), time.perf_counter()
     load = round(os.getloadavg()[0], 2) if hasattr(os, "getloadavg") else None
     results: dict[str, SectionResult] = {}
-    with tempfile.TemporaryDirectory(prefix="ddfbench-bench-") as workdir:
-        shared = Context(device, {}, args.repeats, args.warmup, workdir, threads, oracle_backend=args.oracle_backend)
-        for name in sections:
-            print(f"[bench] {name} ...", file=sys.stderr, flush=True)
-            shared.sizes = SIZES[args.sizes][name]
-            results[name] = run_section(name, shared)
-            failed = f" FAILED {results[name].error}" if results[name].error else ""
-            print(f"[bench] {name}: {results[name].seconds:.1f} s{failed}", file=sys.stderr, flush=True)
+    previous = signal.signal(signal.SIGTERM, _stop)
+    try:
+        with tempfile.TemporaryDirectory(prefix="ddfbench-bench-") as workdir:
+            shared = Context(device, {}, args.repeats, args.warmup, workdir, threads, oracle_backend=args.oracle_backend)
+            for name in sections:
+                print(f"[bench] {name} ...", file=sys.stderr, flush=True)
+                shared.sizes = SIZES[args.sizes][name]
+                results[name] = run_section(name, shared)
+                failed = f" FAILED {results[name].error}" if results[name].error else ""
+                print(f"[bench] {name}: {results[name].seconds:.1f} s{failed}", file=sys.stderr, flush=True)
+                if results[name].error and results[name].error.startswith(Stopped.__name__):
+                    break  # the sections not started are left out of the report
+    finally:
+        signal.signal(signal.SIGTERM, previous)
     doc = {
         "command": " ".join(["python -m ddfbench.bench", *(argv if argv is not None else sys.argv[1:])]),
         "started": started, "total_s": time.perf_counter() - t0, "load_average_start": load,

@@ -8,6 +8,7 @@ from typing import Any
 from omegaconf import OmegaConf
 
 from ddfbench import plugins
+from ddfbench.bench.results import SectionResult
 from ddfbench.geometry import BOX_HALF
 from ddfbench.oracle import Oracle
 from ddfbench.shapes import Shape, load_shape
@@ -30,7 +31,8 @@ def model_preset(name: str, **overrides: Any) -> dict[str, Any]:
 class Context:
     """device: "cpu" | "cuda[:k]"; sizes: this section's size parameters; repeats, warmup: timed and
     untimed warm calls; workdir: scratch space for runs the section starts; oracle_backend: the ground
-    truth's backend ("open3d", or "warp" where open3d is not installed)."""
+    truth's backend ("open3d", or "warp" where open3d is not installed); partial: the result a long
+    section fills as it goes, kept when it fails or is stopped midway (bench.__main__.run_section)."""
 
     device: str
     sizes: dict[str, Any]
@@ -39,6 +41,7 @@ class Context:
     workdir: str
     threads: int
     oracle_backend: str = "open3d"
+    partial: SectionResult | None = None
     _shapes: dict[str, Shape] = field(default_factory=dict)
     _oracles: dict[tuple[str, str], Oracle] = field(default_factory=dict)
 

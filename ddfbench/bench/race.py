@@ -113,10 +113,15 @@ def race(ctx: Context, o_np: np.ndarray, d_np: np.ndarray, contestants: dict[str
     return out
 
 
+def _precision(measure: str) -> str:
+    """The precision column of a row, from the contestant its measure names ("DDF (ddf_bf16_compiled) ..." -> bf16)."""
+    return "bf16" if "bf16" in measure else "fp32"
+
+
 def _rate_row(measure: str, value_t: Timing, ref_name: str, ref_t: Timing, n: int, ctx: Context,
               target: Target | None = None, note: str = ""):
     return compare("race", measure, value_t.rate(n), "rays/s", ref_name, ref_t.rate(n), device=ctx.device,
-                   threads=ctx.threads, target=target, note=note)
+                   threads=ctx.threads, precision=_precision(measure), target=target, note=note)
 
 
 def run(ctx: Context) -> SectionResult:
@@ -124,7 +129,7 @@ def run(ctx: Context) -> SectionResult:
 
     s = ctx.sizes
     shape, oracle = ctx.shape(s["shape"]), ctx.oracle(s["shape"])
-    result = SectionResult(details={"cpu_cores": os.cpu_count()})
+    result = ctx.partial = SectionResult(details={"cpu_cores": os.cpu_count()})
     samples = surface.sample(shape, oracle, preset("sampling", "surface"), "rays", np.random.default_rng(0))[0]
     ddf, result.details["ddf"] = train_ddf(ctx, samples, dict(s.get("model") or {}))
     nsdf, result.details["neural_sdf"] = neural_sdf(ctx, SDF_PRESET)
@@ -182,7 +187,7 @@ def _race_all(ctx: Context, result: SectionResult, samples, ddf, nsdf, gsdf, war
         if ctx.device.startswith("cuda") and n >= 1_000_000:
             result.rows.append(compare("race", f"{set_name}: DDF ({best}) rays/s", timed[best][1].rate(n), "rays/s",
                                        "goal 1e9 rays/s (H100/H200, 1M+ rays)", 1e9, device=ctx.device,
-                                       threads=ctx.threads, target=SPEED_GOAL))
+                                       threads=ctx.threads, precision=_precision(best), target=SPEED_GOAL))
     result.details["sweep"] = sweep(ctx, variants, warp, embree, result)
     if s.get("capacities", True):
         result.details["capacities"] = capacities(ctx, samples, ray_sets["primary"], reference, result)
@@ -252,5 +257,6 @@ def capacities(ctx: Context, samples, primary, reference: Callable, result: Sect
         result.rows.append(compare("race", f"capacity {level} ({info['width']}x{info['depth']}): DDF ({best}) rays/s",
                                    timed[best][1].rate(len(o_np)), "rays/s", "same network fp32 rays/s",
                                    timed["ddf_fp32"][1].rate(len(o_np)), device=ctx.device, threads=ctx.threads,
+                                   precision=_precision(best),
                                    note=f"depth MAE {out[level][best]['depth_mae']:.2e}, IoU {out[level][best]['mask_iou']:.3f}"))
     return out
