@@ -25,25 +25,57 @@ class DDFDepth:
 
     rep: a fitted DDF; precision: fp32 | bf16 | fp16 (autocast); compiled: torch.compile the per-chunk
     function (mode "default"; dynamic shapes, so the last, shorter chunk does not recompile);
+    fused: the MLP as one Triton kernel (ddfbench.ddf_fused; bf16 only), with compiled the box entry and
+    encoding before it and the hit rule after it compiled;
     chunk: rays per network call (bounds the activations: ~chunk * width * 4 bytes per layer).
     The hit rule is DDF.intersect's: visible, not nearer than min_hit_distance, not beyond the box exit.
     """
 
-    def __init__(self, rep: DDF, precision: str = "fp32", compiled: bool = False, chunk: int = 1 << 20):
+    def __init__(self, rep: DDF, precision: str = "fp32", compiled: bool = False, chunk: int = 1 << 20,
+                 fused: bool = False):
         if precision not in PRECISIONS:
             raise ValueError(f"DDF precision '{precision}': unknown ({' | '.join(PRECISIONS)})")
+        if fused and precision != "bf16":
+            raise ValueError(f"DDF precision '{precision}': the fused MLP computes in bf16 only")
         self.rep, self.precision, self.chunk = rep, precision, int(chunk)
         self.device = next(rep.net.parameters()).device
         rep.net.eval()
-        self._step: Callable[[torch.Tensor, torch.Tensor], torch.Tensor] = self._chunk_depth
-        if compiled:
-            self._step = torch.compile(self._chunk_depth, dynamic=True)
+        step: Callable[[torch.Tensor, torch.Tensor], torch.Tensor] = self._chunk_depth
+        if fused:
+            from ddfbench.ddf_fused import FusedMLP
+
+            self._mlp = FusedMLP(rep.net)
+            self._pre, self._post = self._fused_inputs, self._answer
+            if compiled:
+                self._pre, self._post = torch.compile(self._pre, dynamic=True), torch.compile(self._post, dynamic=True)
+            step = self._fused_depth
+        elif compiled:
+            step = torch.compile(step, dynamic=True)
+        self._step = step
 
     def _chunk_depth(self, o: torch.Tensor, d: torch.Tensor) -> torch.Tensor:
         t_entry, t_exit, meets = box_entry(o, d, self.rep.domain)
         dtype = PRECISIONS[self.precision]
         with torch.autocast(self.device.type, dtype=dtype or torch.float32, enabled=dtype is not None):
             dist, logit = self.rep.net(o + t_entry[:, None] * d, d)
+        return self._hit(dist, logit, t_entry, t_exit, meets)
+
+    def _fused_inputs(self, o: torch.Tensor, d: torch.Tensor):
+        """The fused kernel's input (N, K0) bf16, and the ray coordinate and box entry the answer needs."""
+        t_entry, t_exit, meets = box_entry(o, d, self.rep.domain)
+        feats, s0 = self.rep.net.features(o + t_entry[:, None] * d, d)
+        return self._mlp.pad(feats), s0, t_entry, t_exit, meets
+
+    def _fused_depth(self, o: torch.Tensor, d: torch.Tensor) -> torch.Tensor:
+        x, s0, t_entry, t_exit, meets = self._pre(o, d)
+        return self._post(self._mlp(x), s0, t_entry, t_exit, meets)
+
+    def _answer(self, y: torch.Tensor, s0, t_entry, t_exit, meets) -> torch.Tensor:
+        dist, logit = self.rep.net.outputs(y, s0)
+        return self._hit(dist, logit, t_entry, t_exit, meets)
+
+    def _hit(self, dist, logit, t_entry, t_exit, meets) -> torch.Tensor:
+        """t (N,) where the ray hits, else inf: distance dist (N,) from the box entry t_entry (N,)."""
         dist = dist.float().clamp_min(0.0)
         visible = self.rep._hit_from(dist, None if logit is None else logit.float())
         t = t_entry + dist

@@ -128,17 +128,19 @@ def _git(*args: str) -> str | None:
         return None
 
 
-GIT_SHA_ENV = "DDFBENCH_GIT_SHA"  # names the commit of a copy of the tree without .git (a lent GPU machine)
+# names the commit of a copied tree whose .git is missing or stale (a lent GPU machine's copy carries the
+# working tree over the .git of the session's first commit); when set it wins over git
+GIT_SHA_ENV = "DDFBENCH_GIT_SHA"
 
 
 def _git_sha() -> str | None:
-    return _git("rev-parse", "HEAD") or os.environ.get(GIT_SHA_ENV)
+    return os.environ.get(GIT_SHA_ENV) or _git("rev-parse", "HEAD")
 
 
 def code_sha() -> str | None:
     """The last commit that changed the code (CODE_PATHS): committing reports midway leaves it unchanged.
-    In a copy without .git, $DDFBENCH_GIT_SHA (whoever copies the tree names a commit that changed the code)."""
-    return _git("log", "-1", "--format=%H", "--", *CODE_PATHS) or os.environ.get(GIT_SHA_ENV)
+    $DDFBENCH_GIT_SHA where set (whoever copies the tree names a commit that changed the code)."""
+    return os.environ.get(GIT_SHA_ENV) or _git("log", "-1", "--format=%H", "--", *CODE_PATHS)
 
 
 OPTIONAL = ("open3d", "warp", "pymeshlab", "embreex")  # modules whose versions are recorded; a GPU machine may lack some

@@ -94,7 +94,7 @@ def test_same_answers_on_the_device_as_on_the_cpu(fits, family):
 
 
 def test_ddf_device_depth_in_reduced_precision_and_compiled(fits):
-    """ddf_infer.DDFDepth on the device: fp32 equals DDF.intersect; bf16 and compiled bf16 stay close to it."""
+    """ddf_infer.DDFDepth on the device: fp32 equals DDF.intersect; bf16, compiled bf16 and the fused MLP stay close to it."""
     if "ddf" not in fits:
         pytest.skip("no ddf family")
     from ddfbench.ddf_infer import DDFDepth
@@ -106,6 +106,7 @@ def test_ddf_device_depth_in_reduced_precision_and_compiled(fits):
     variants = {"fp32": DDFDepth(rep, "fp32", chunk=700), "bf16": DDFDepth(rep, "bf16", chunk=700)}
     if DEVICE.startswith("cuda"):  # a CPU compile takes minutes on a small machine
         variants["bf16 compiled"] = DDFDepth(rep, "bf16", compiled=True, chunk=700)
+        variants["bf16 fused, compiled"] = DDFDepth(rep, "bf16", compiled=True, fused=True, chunk=700)
     for name, depth in variants.items():
         t = depth(od, dd).cpu().numpy()
         assert not np.isnan(t).any(), name

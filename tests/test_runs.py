@@ -81,13 +81,13 @@ def test_environment_records_optional_package_versions_whatever_was_imported(mon
     assert environment("cpu", 1)["versions"]["open3d"] is None
 
 
-def test_a_copy_without_git_names_its_commit_through_the_environment(monkeypatch):
-    """A lent GPU machine gets the tree without .git: git answers nothing, and $DDFBENCH_GIT_SHA names the commit."""
+def test_a_copied_tree_names_its_commit_through_the_environment(monkeypatch):
+    """A lent GPU machine gets the working tree over a stale .git (or none): $DDFBENCH_GIT_SHA names the commit."""
     from ddfbench import runs
 
-    monkeypatch.setattr(runs, "_git", lambda *args: None)
+    monkeypatch.setattr(runs, "_git", lambda *args: "stale")
     monkeypatch.delenv(runs.GIT_SHA_ENV, raising=False)
-    assert runs.environment("cpu", 1)["git_sha"] is None and runs.code_sha() is None
+    assert runs.environment("cpu", 1)["git_sha"] == "stale" == runs.code_sha()
     monkeypatch.setenv(runs.GIT_SHA_ENV, "0123abc")
     env = runs.environment("cpu", 1)
     assert env["git_sha"] == env["code_sha"] == "0123abc"

@@ -91,13 +91,29 @@ def bare_forward(rep: DDF, o: torch.Tensor, d: torch.Tensor, chunk: int, precisi
     return run
 
 
-def ddf_variants(ctx: Context, rep: DDF, compile_too: bool) -> dict[str, DDFDepth]:
-    """fp32, bf16 and (with compile_too and sizes `compile`) bf16 compiled depth of rep, fastest last."""
+def ddf_variants(ctx: Context, rep: DDF, compile_too: bool, details: dict | None = None) -> dict[str, DDFDepth]:
+    """fp32, bf16 and (with compile_too and sizes `compile`) bf16 compiled and, on CUDA with Triton, the
+    bf16 fused MLP (ddfbench.ddf_fused, its box entry and hit rule compiled) of rep. A variant that cannot
+    be built or fails its first call on 256 rays is left out, with why in details[name]."""
     chunk = int(ctx.sizes["chunk"])
     out = {"ddf_fp32": DDFDepth(rep, "fp32", chunk=chunk), "ddf_bf16": DDFDepth(rep, "bf16", chunk=chunk)}
     if compile_too and ctx.sizes.get("compile"):
         out["ddf_bf16_compiled"] = DDFDepth(rep, "bf16", compiled=True, chunk=chunk)
+        if ctx.device.startswith("cuda") and importlib.util.find_spec("triton") is not None:
+            try:
+                fused = DDFDepth(rep, "bf16", compiled=True, chunk=chunk, fused=True)
+                o, d = incoherent_rays(256, seed=5)
+                fused(torch.as_tensor(o, device=ctx.device), torch.as_tensor(d, device=ctx.device))
+                out["ddf_bf16_fused"] = fused
+            except Exception as err:  # the race goes on without it; the JSON says why
+                if details is not None:
+                    details["ddf_bf16_fused"] = f"not run: {type(err).__name__}: {(str(err).splitlines() or [''])[0]}"
     return out
+
+
+def fastest(timed: dict[str, tuple], names) -> str:
+    """The name among `names` with the shortest median time in timed (race's output)."""
+    return min((n for n in names if n in timed), key=lambda n: timed[n][1].median_s)
 
 
 def race(ctx: Context, o_np: np.ndarray, d_np: np.ndarray, contestants: dict[str, Callable]) -> dict[str, tuple]:
@@ -152,7 +168,7 @@ def _race_all(ctx: Context, result: SectionResult, samples, ddf, nsdf, gsdf, war
     """The two ray sets, the sweep and the capacities (run's body, once every contestant is built);
     reference(o, d) -> t (N,): the depth every contestant is scored against."""
     s, chunk = ctx.sizes, int(ctx.sizes["chunk"])
-    variants = ddf_variants(ctx, ddf, compile_too=True)
+    variants = ddf_variants(ctx, ddf, compile_too=True, details=result.details)
     contestants: dict[str, Callable] = {name: (lambda o, d, on, dn, f=f: f(o, d)) for name, f in variants.items()}
     contestants.update({
         "warp_bvh": lambda o, d, on, dn: warp.cast_torch(o, d)[0],
@@ -173,7 +189,7 @@ def _race_all(ctx: Context, result: SectionResult, samples, ddf, nsdf, gsdf, war
             details[name] = {**timing.as_dict(), "rays_per_s": timing.rate(n)}
             if not name.startswith("ddf_bare"):
                 details[name].update(accuracy(t, t_ref))
-        best = "ddf_bf16_compiled" if "ddf_bf16_compiled" in timed else "ddf_bf16"
+        best = fastest(timed, variants)
         acc = {k: details[k] for k in ("ddf_fp32", best, "warp_bvh")}
         note = (f"DDF depth MAE {acc[best]['depth_mae']:.2e} IoU {acc[best]['mask_iou']:.3f}; "
                 f"Warp MAE {acc['warp_bvh']['depth_mae']:.1e} IoU {acc['warp_bvh']['mask_iou']:.4f}")
@@ -183,12 +199,14 @@ def _race_all(ctx: Context, result: SectionResult, samples, ddf, nsdf, gsdf, war
         result.rows.append(_rate_row(f"{set_name}: DDF ({best}) rays/s", timed[best][1],
                                      "bare bf16 network forward rays/s, same entry points", timed["ddf_bare_bf16"][1],
                                      n, ctx, target=BARE_SHARE if ctx.device.startswith("cuda") else None))
-        details[f"{best}_vs_fp32_depth_diff"] = _diff(timed[best][0], timed["ddf_fp32"][0])
+        for name in variants:
+            if name != "ddf_fp32":
+                details[f"{name}_vs_fp32_depth_diff"] = _diff(timed[name][0], timed["ddf_fp32"][0])
         if ctx.device.startswith("cuda") and n >= 1_000_000:
             result.rows.append(compare("race", f"{set_name}: DDF ({best}) rays/s", timed[best][1].rate(n), "rays/s",
                                        "goal 1e9 rays/s (H100/H200, 1M+ rays)", 1e9, device=ctx.device,
                                        threads=ctx.threads, precision=_precision(best), target=SPEED_GOAL))
-    result.details["sweep"] = sweep(ctx, variants, warp, embree, result)
+    result.details["sweep"] = sweep(ctx, variants, best, warp, embree, result)
     if s.get("capacities", True):
         result.details["capacities"] = capacities(ctx, samples, ray_sets["primary"], reference, result)
 
@@ -220,11 +238,11 @@ def _diff(t: np.ndarray, t_fp32: np.ndarray) -> dict[str, float]:
             "mask_disagreement": float((a != b).mean())}
 
 
-def sweep(ctx: Context, variants: dict[str, DDFDepth], warp, embree: dict, result: SectionResult) -> list[dict]:
-    """Incoherent ray counts `sweep`: median latency and rays/s of the DDF's fastest variant, Warp and
-    Embree (up to embree_max rays)."""
+def sweep(ctx: Context, variants: dict[str, DDFDepth], best_name: str, warp, embree: dict,
+          result: SectionResult) -> list[dict]:
+    """Incoherent ray counts `sweep`: median latency and rays/s of the DDF's variant best_name (the fastest
+    on the incoherent set), Warp and Embree (up to embree_max rays)."""
     s, rows = ctx.sizes, []
-    best_name = list(variants)[-1]
     best = variants[best_name]
     for n in (int(v) for v in s["sweep"]):
         o_np, d_np = incoherent_rays(n, seed=2)
@@ -253,7 +271,7 @@ def capacities(ctx: Context, samples, primary, reference: Callable, result: Sect
         timed = race(ctx, o_np, d_np, {name: (lambda o, d, on, dn, f=f: f(o, d)) for name, f in ddf_variants(ctx, rep, False).items()})
         out[level] = {**info, **{name: {"rays_per_s": timing.rate(len(o_np)), **accuracy(t, t_ref)}
                                  for name, (t, timing) in timed.items()}}
-        best = list(timed)[-1]
+        best = list(timed)[-1]  # bf16
         result.rows.append(compare("race", f"capacity {level} ({info['width']}x{info['depth']}): DDF ({best}) rays/s",
                                    timed[best][1].rate(len(o_np)), "rays/s", "same network fp32 rays/s",
                                    timed["ddf_fp32"][1].rate(len(o_np)), device=ctx.device, threads=ctx.threads,

@@ -75,12 +75,11 @@ class DDFNet(nn.Module):
         self.body = nn.Sequential(*layers)
         self.out = nn.Linear(n_in, n_out)
 
-    def forward(self, x: torch.Tensor, d: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor | None]:
-        if self.param == "ray":
-            s0 = (x * d).sum(-1, keepdim=True)
-            pos = torch.cat([x - s0 * d, s0], -1)
-        else:
-            pos = x
+    def features(self, x: torch.Tensor, d: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor | None]:
+        """The MLP's input (N, n_in) of x (N,3), unit d (N,3), and the ray coordinate s0 = x.d (N,1) (None
+        unless param is ray)."""
+        s0 = (x * d).sum(-1, keepdim=True) if self.param == "ray" else None
+        pos = torch.cat([x - s0 * d, s0], -1) if s0 is not None else x
         if self.direction == "angles":
             polar = torch.acos(d[:, 2:3].clamp(-1.0, 1.0))
             dirs = torch.cat([polar, torch.atan2(d[:, 1:2], d[:, 0:1])], -1)
@@ -89,6 +88,14 @@ class DDFNet(nn.Module):
         inputs = [self.pos_pe(pos), self.dir_pe(dirs)]
         if self.grid is not None:
             inputs.append(self.grid(x - (x * d).sum(-1, keepdim=True) * d, d))
-        y = self.out(self.body(torch.cat(inputs, -1)))
-        dist = y[:, 0] - s0[:, 0] if self.param == "ray" else y[:, 0]
+        return torch.cat(inputs, -1), s0
+
+    @staticmethod
+    def outputs(y: torch.Tensor, s0: torch.Tensor | None) -> tuple[torch.Tensor, torch.Tensor | None]:
+        """(distance (N,), visibility logit (N,) or None) from the MLP's output y (N, 1 | 2) and features' s0."""
+        dist = y[:, 0] - s0[:, 0] if s0 is not None else y[:, 0]
         return dist, (y[:, 1] if y.shape[1] > 1 else None)
+
+    def forward(self, x: torch.Tensor, d: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor | None]:
+        feats, s0 = self.features(x, d)
+        return self.outputs(self.out(self.body(feats)), s0)

@@ -1,0 +1,126 @@
+"""ddfbench.ddf_fused: the DDF's MLP as one Triton kernel gives the layer-by-layer bf16 answer.
+
+On CUDA (`pytest -m gpu`) the kernel runs on the device; without CUDA, where Triton is installed, the same
+checks run in a subprocess under TRITON_INTERPRET=1 (Triton's CPU interpreter; the variable must be set
+before the kernel is defined). Without either the tests skip.
+"""
+
+import importlib.util
+import os
+import subprocess
+import sys
+
+import pytest
+import torch
+from torch import nn
+
+from ddfbench.bench.context import model_preset
+from ddfbench.models.ddf import DDF
+
+HAS_TRITON = importlib.util.find_spec("triton") is not None
+CUDA = torch.cuda.is_available()
+INTERPRETED = os.environ.get("TRITON_INTERPRET") == "1"
+DEVICE = "cuda" if CUDA else "cpu"
+pytestmark = pytest.mark.skipif(not HAS_TRITON, reason="Triton is not installed (it comes with CUDA builds of torch)")
+
+# (width, depth, pos_freqs, dir_freqs): ddf_tuned, the pareto c1 and c3 levels, and a body with no hidden layer
+NETWORKS = [(128, 4, 5, 1), (64, 3, 5, 1), (256, 6, 5, 1), (32, 1, 0, 0)]
+
+
+def random_rep(width: int, depth: int, pos_freqs: int, dir_freqs: int, seed: int = 0) -> DDF:
+    torch.manual_seed(seed)
+    rep = DDF(model_preset("ddf_tuned", width=width, depth=depth, pos_freqs=pos_freqs, dir_freqs=dir_freqs))
+    with torch.no_grad():  # biases away from 0, so that a dropped bias shows
+        for m in rep.net.modules():
+            if isinstance(m, nn.Linear):
+                m.bias.uniform_(-0.5, 0.5)
+    return rep.to(DEVICE)
+
+
+def rays(n: int, seed: int = 1) -> tuple[torch.Tensor, torch.Tensor]:
+    g = torch.Generator().manual_seed(seed)
+    o = (torch.rand(n, 3, generator=g) * 2.4 - 1.2)
+    d = nn.functional.normalize(torch.randn(n, 3, generator=g), dim=1)
+    return o.to(DEVICE), d.to(DEVICE)
+
+
+def layerwise_bf16(net, feats: torch.Tensor) -> torch.Tensor:
+    """The kernel's arithmetic written layer by layer: bf16 inputs and weights, fp32 sums and bias, ReLU, bf16."""
+    h = feats.to(torch.bfloat16).float()
+    linears = [m for m in net.body if isinstance(m, nn.Linear)]
+    for m in linears:
+        h = torch.relu(h @ m.weight.to(torch.bfloat16).float().t() + m.bias.float()).to(torch.bfloat16).float()
+    return h @ net.out.weight.to(torch.bfloat16).float().t() + net.out.bias.float()
+
+
+def run_interpreted(test: str) -> None:
+    """Run this file's test `test` in a subprocess under Triton's CPU interpreter."""
+    env = {**os.environ, "TRITON_INTERPRET": "1"}
+    out = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", f"{__file__}::{test}"],
+                         env=env, capture_output=True, text=True, timeout=600)
+    assert out.returncode == 0, out.stdout[-3000:] + out.stderr[-2000:]
+
+
+def needs_a_kernel_runner(test: str) -> bool:
+    """True where the test body should run here (CUDA, or already interpreted); else it runs interpreted."""
+    if CUDA or INTERPRETED:
+        return True
+    run_interpreted(test)
+    return False
+
+
+@pytest.mark.gpu
+@pytest.mark.parametrize("shape", NETWORKS, ids=lambda s: "x".join(map(str, s)))
+def test_fused_mlp_equals_the_layerwise_bf16_forward(shape):
+    if not needs_a_kernel_runner(f"test_fused_mlp_equals_the_layerwise_bf16_forward[{'x'.join(map(str, shape))}]"):
+        return
+    from ddfbench.ddf_fused import FusedMLP
+
+    rep = random_rep(*shape)
+    o, d = rays(1000)  # not a multiple of the block: the last block is masked
+    feats, _ = rep.net.features(o, d)
+    mlp = FusedMLP(rep.net)
+    y = mlp(mlp.pad(feats))
+    ref = layerwise_bf16(rep.net, feats)
+    with torch.no_grad():
+        y32 = rep.net.out(rep.net.body(feats))
+    assert y.shape == (1000, 2) and y.dtype == torch.float32
+    scale = ref.abs().mean()
+    # the same arithmetic up to the order of fp32 sums (a bf16 rounding may flip): ~1 bf16 step
+    assert (y - ref).abs().max() < 0.02 * scale + 1e-3, float((y - ref).abs().max())
+    # and as close to the fp32 network as bf16 allows
+    assert (y - y32).abs().mean() < 0.02 * scale, float((y - y32).abs().mean())
+    assert mlp(mlp.pad(feats[:0])).shape == (0, 2)
+
+
+@pytest.mark.gpu
+def test_fused_depth_answers_like_the_bf16_depth():
+    """DDFDepth(fused) against DDFDepth(bf16 autocast) of the same network: same hits, close depths."""
+    if not needs_a_kernel_runner("test_fused_depth_answers_like_the_bf16_depth"):
+        return
+    from ddfbench.ddf_infer import DDFDepth
+
+    rep = random_rep(128, 4, 5, 1)
+    o, d = rays(3000, seed=2)
+    t_ref = DDFDepth(rep, "fp32", chunk=1024)(o, d)
+    t_fused = DDFDepth(rep, "bf16", fused=True, chunk=1024)(o, d)
+    hit, ref_hit = torch.isfinite(t_fused), torch.isfinite(t_ref)
+    assert ref_hit.float().mean() > 0.1  # the random network answers "hit" on ~18 % of these rays
+    assert (hit == ref_hit).float().mean() > 0.97
+    both = hit & ref_hit
+    assert (t_fused[both] - t_ref[both]).abs().mean() < 0.02
+
+
+def test_what_is_not_fused_is_refused():
+    from ddfbench.ddf_fused import FusedMLP, supported
+    from ddfbench.ddf_infer import DDFDepth
+
+    base = model_preset("ddf_tuned")
+    assert supported(DDF(base).net) is None
+    assert "softplus" in supported(DDF({**base, "activation": "softplus"}).net)
+    assert "width 512" in supported(DDF({**base, "width": 512}).net)
+    assert "line grid" in supported(DDF({**base, "line_grid_points": 4}).net)
+    with pytest.raises(ValueError, match="width 512"):
+        FusedMLP(DDF({**base, "width": 512}).net)
+    with pytest.raises(ValueError, match="bf16 only"):
+        DDFDepth(DDF(base), "fp32", fused=True)
