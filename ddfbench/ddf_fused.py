@@ -5,10 +5,10 @@ reads them back, ~N * width * 2 bytes a layer in bf16: for a 128-wide MLP that t
 ~10^5 FLOP a ray, bounds it (measured on an H100: reports/bench/bench-cuda-*.md). Here a program takes
 BLOCK rays, reads their encoded inputs (BLOCK, K0) bf16 once, runs every Linear + ReLU as a bf16 matrix
 product with fp32 accumulation (bias added in fp32, then rounded to bf16 as autocast's Linear does) and
-writes only the output head (BLOCK, n_out) in fp32. Weights (~33 KB a 128x128 layer) stay in L2.
+writes only the output head (BLOCK, n_out) in fp32 (a row sum each: n_out <= 2). Weights (~33 KB a 128x128 layer) stay in L2.
 
 Supports the DDF networks of ddfbench.models.ddf.network.DDFNet with ReLU, no weight norm, no dropout,
-no line grid, width a power of two from 16 to 256 (`supported` says why not otherwise). Runs wherever
+no line grid, width a power of two from 64 to 256 (`supported` says why not otherwise). Runs wherever
 Triton runs its kernels: CUDA, or the CPU under TRITON_INTERPRET=1 (how the tests check it without a GPU).
 """
 
@@ -23,7 +23,10 @@ from torch import nn
 
 from ddfbench.models.ddf.network import DDFNet
 
-N_OUT_PAD = 16  # the output head padded to a matrix-product tile (tl.dot needs every dimension >= 16)
+# Triton 3.6-3.7 on sm_90 reads shared memory out of bounds (an illegal memory access, or silent corruption) in
+# kernels with two or more tl.dot where a dot dimension is 16 or 32 (seen here on an H100 with a 16-wide output
+# dot; triton-lang/triton#10486, #11366): every dot dimension here is 64 or more, the head is a reduction
+MIN_DOT = 64
 # Triton's CPU interpreter multiplies bf16 matrices wrongly (its numpy has no bf16): there the bf16 values are
 # multiplied as float32, which is exact for bf16 products, and summed in float32 as the tensor cores do
 INTERPRETED = os.environ.get("TRITON_INTERPRET") == "1"
@@ -42,9 +45,9 @@ def _mm(a, b, DOT_F32: tl.constexpr):
 @triton.jit
 def _mlp_kernel(x_ptr, w0_ptr, b0_ptr, wh_ptr, bh_ptr, wo_ptr, bo_ptr, y_ptr, n_rows,
                 K0: tl.constexpr, WIDTH: tl.constexpr, HIDDEN: tl.constexpr, N_OUT: tl.constexpr,
-                N_PAD: tl.constexpr, BLOCK: tl.constexpr, DOT_F32: tl.constexpr):
+                BLOCK: tl.constexpr, DOT_F32: tl.constexpr):
     """y (n_rows, N_OUT) fp32 = out(relu(... relu(x W0 + b0) ...)) for x (n_rows, K0) bf16; W0 (K0, WIDTH),
-    hidden Wh (HIDDEN, WIDTH, WIDTH), out Wo (WIDTH, N_PAD) bf16, stored input-major; biases fp32."""
+    hidden Wh (HIDDEN, WIDTH, WIDTH) bf16, stored input-major; out Wo (N_OUT, WIDTH) bf16; biases fp32."""
     rows = tl.program_id(0) * BLOCK + tl.arange(0, BLOCK)
     live = rows < n_rows
     k = tl.arange(0, K0)
@@ -56,9 +59,10 @@ def _mlp_kernel(x_ptr, w0_ptr, b0_ptr, wh_ptr, bh_ptr, wo_ptr, bo_ptr, y_ptr, n_
         w = tl.load(wh_ptr + i * WIDTH * WIDTH + c[:, None] * WIDTH + c[None, :])
         h = _mm(h, w, DOT_F32) + tl.load(bh_ptr + i * WIDTH + c)[None, :]
         h = tl.maximum(h, 0.0).to(tl.bfloat16)
-    o = tl.arange(0, N_PAD)
-    y = _mm(h, tl.load(wo_ptr + c[:, None] * N_PAD + o[None, :]), DOT_F32) + tl.load(bo_ptr + o)[None, :]
-    tl.store(y_ptr + rows[:, None] * N_OUT + o[None, :], y, mask=live[:, None] & (o[None, :] < N_OUT))
+    h32 = h.to(tl.float32)
+    for j in tl.static_range(N_OUT):  # the head: N_OUT <= 2 outputs, each a row sum
+        w = tl.load(wo_ptr + j * WIDTH + c).to(tl.float32)
+        tl.store(y_ptr + rows * N_OUT + j, tl.sum(h32 * w[None, :], axis=1) + tl.load(bo_ptr + j), mask=live)
 
 
 def supported(net: DDFNet) -> str | None:
@@ -69,13 +73,13 @@ def supported(net: DDFNet) -> str | None:
     if any(not isinstance(m, (nn.Linear, nn.ReLU)) for m in net.body):
         return "only Linear + ReLU bodies are fused (not softplus, dropout or weight norm)"
     width = linears[0].out_features
-    if width & (width - 1) or not 16 <= width <= 256:
-        return f"width {width}: the fused MLP needs a power of two from 16 to 256"
+    if width & (width - 1) or not MIN_DOT <= width <= 256:
+        return f"width {width}: the fused MLP needs a power of two from {MIN_DOT} to 256"
     return None
 
 
 def _pow2(n: int) -> int:
-    return max(16, 1 << (int(n) - 1).bit_length())
+    return max(MIN_DOT, 1 << (int(n) - 1).bit_length())
 
 
 class FusedMLP:
@@ -100,10 +104,8 @@ class FusedMLP:
             self.wh = (torch.stack([m.weight.t() for m in hidden]) if hidden else torch.zeros(1, self.width, self.width))
             self.wh = self.wh.to(**bf16).contiguous()
             self.bh = (torch.stack([m.bias for m in hidden]) if hidden else torch.zeros(1, self.width)).float().to(dev)
-            self.wo = torch.zeros(self.width, N_OUT_PAD, **bf16)
-            self.wo[:, : self.n_out] = out.weight.t()
-            self.bo = torch.zeros(N_OUT_PAD, device=dev)
-            self.bo[: self.n_out] = out.bias
+            self.wo = out.weight.to(**bf16).contiguous()
+            self.bo = out.bias.float().contiguous()
         self.hidden = len(hidden)
         self.block = 128 if self.width <= 128 else 64
         self.warps = 8 if self.width >= 128 else 4
@@ -119,6 +121,6 @@ class FusedMLP:
         if n:
             _mlp_kernel[(triton.cdiv(n, self.block),)](
                 x, self.w0, self.b0, self.wh, self.bh, self.wo, self.bo, y, n, K0=self.k0, WIDTH=self.width,
-                HIDDEN=self.hidden, N_OUT=self.n_out, N_PAD=N_OUT_PAD, BLOCK=self.block, DOT_F32=INTERPRETED,
+                HIDDEN=self.hidden, N_OUT=self.n_out, BLOCK=self.block, DOT_F32=INTERPRETED,
                 num_warps=self.warps)
         return y

@@ -102,6 +102,8 @@ def test_bad_options_are_refused(tmp_path, capsys):
     assert main(["--only", "sampling,nonsense", "--out", str(tmp_path)]) == 2
     assert "nonsense" in capsys.readouterr().err
     assert main(["--repeats", "0", "--out", str(tmp_path)]) == 2
+    assert main(["--set", "race.no_such_key=1", "--out", str(tmp_path)]) == 2
+    assert "race.no_such_key" in capsys.readouterr().err
     assert main(["--device", "tpu", "--out", str(tmp_path)]) == 2
     assert "--device 'tpu': unknown device" in capsys.readouterr().err
     with pytest.raises(SystemExit):
@@ -220,7 +222,8 @@ def test_a_section_stopped_by_sigterm_keeps_what_it_measured(tmp_path, monkeypat
 
     monkeypatch.setattr(race, "capacities", stopped)
     before = signal.getsignal(signal.SIGTERM)
-    assert main(["--sizes", "small", "--only", "metrics,race,gan_train", "--repeats", "1", "--out", str(tmp_path)]) == 1
+    assert main(["--sizes", "small", "--only", "metrics,race,gan_train", "--repeats", "1", "--out", str(tmp_path),
+                 "--set", "race.sweep=[50]"]) == 1
     assert signal.getsignal(signal.SIGTERM) is before
     doc = json.loads((tmp_path / "bench-cpu-small.json").read_text())
     section = doc["sections"]["race"]
@@ -228,4 +231,7 @@ def test_a_section_stopped_by_sigterm_keeps_what_it_measured(tmp_path, monkeypat
     measures = [row["measure"] for row in section["rows"]]
     assert any(m.startswith("primary:") for m in measures) and any(m.startswith("sweep ") for m in measures)
     assert not any(m.startswith("capacity") for m in measures)
+    sweeps = [m for m in measures if m.startswith("sweep ")]
+    assert len(sweeps) == 1 and sweeps[0].startswith("sweep 50 rays")
+    assert doc["sizes"]["race"]["sweep"] == [50] and "--set race.sweep=[50]" in doc["command"]
     assert doc["sections"]["metrics"]["rows"] and "gan_train" not in doc["sections"]

@@ -24,7 +24,7 @@ DEVICE = "cuda" if CUDA else "cpu"
 pytestmark = pytest.mark.skipif(not HAS_TRITON, reason="Triton is not installed (it comes with CUDA builds of torch)")
 
 # (width, depth, pos_freqs, dir_freqs): ddf_tuned, the pareto c1 and c3 levels, and a body with no hidden layer
-NETWORKS = [(128, 4, 5, 1), (64, 3, 5, 1), (256, 6, 5, 1), (32, 1, 0, 0)]
+NETWORKS = [(128, 4, 5, 1), (64, 3, 5, 1), (256, 6, 5, 1), (64, 1, 0, 0)]
 
 
 def random_rep(width: int, depth: int, pos_freqs: int, dir_freqs: int, seed: int = 0) -> DDF:
@@ -119,6 +119,7 @@ def test_what_is_not_fused_is_refused():
     assert supported(DDF(base).net) is None
     assert "softplus" in supported(DDF({**base, "activation": "softplus"}).net)
     assert "width 512" in supported(DDF({**base, "width": 512}).net)
+    assert "width 32" in supported(DDF({**base, "width": 32}).net)
     assert "line grid" in supported(DDF({**base, "line_grid_points": 4}).net)
     with pytest.raises(ValueError, match="width 512"):
         FusedMLP(DDF({**base, "width": 512}).net)

@@ -9,6 +9,7 @@ and the command exits 1 after the others have run.
 from __future__ import annotations
 
 import argparse
+import copy
 import datetime as dt
 import importlib
 import os
@@ -18,6 +19,7 @@ import tempfile
 import time
 
 import torch
+import yaml
 
 from ddfbench import heap
 from ddfbench.bench import CUDA_ONLY_BY_DEFAULT, SECTIONS
@@ -61,6 +63,19 @@ def run_section(name: str, ctx: Context) -> SectionResult:
     return result
 
 
+def sized(sizes: dict, settings: list[str]) -> dict:
+    """A copy of sizes ({section: {key: value}}) with each "section.key=value" (value in YAML) applied."""
+    out = copy.deepcopy(sizes)
+    for text in settings:
+        name, eq, value = text.partition("=")
+        section, _, key = name.partition(".")
+        if not eq or key not in out.get(section, {}):
+            raise InputError(f"--set {text!r}: expected SECTION.KEY=VALUE with a known section and key "
+                             f"(race keys: {', '.join(out['race'])})")
+        out[section][key] = yaml.safe_load(value)
+    return out
+
+
 def report_name(device: str, sizes: str) -> str:
     """bench-cpu-<sizes>, or on CUDA bench-cuda-<gpu> (e.g. bench-cuda-nvidia-h100-80gb-hbm3; -<sizes> unless default)."""
     if not device.startswith("cuda"):
@@ -83,9 +98,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--oracle-backend", default="open3d", choices=("open3d", "warp"),
                     help="the ground truth's backend (warp: every query through Warp, for a machine without open3d)")
     ap.add_argument("--out", default=os.path.join("reports", "bench"), help="folder for the .md and .json")
+    ap.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE",
+                    help="override one size of a section (VALUE in YAML), e.g. race.capacities=false; repeatable")
     args = ap.parse_args(argv)
     try:
         device = resolve_device(args.device, "--device")
+        sizes = sized(SIZES[args.sizes], args.set)
         sections = parse_sections(args.only if args.only is not None else ",".join(
             s for s in SECTIONS if device.startswith("cuda") or s not in CUDA_ONLY_BY_DEFAULT))
         if args.repeats < 1 or args.warmup < 0 or args.threads < 0:
@@ -108,7 +126,7 @@ def main(argv: list[str] | None = None) -> int:
             shared = Context(device, {}, args.repeats, args.warmup, workdir, threads, oracle_backend=args.oracle_backend)
             for name in sections:
                 print(f"[bench] {name} ...", file=sys.stderr, flush=True)
-                shared.sizes = SIZES[args.sizes][name]
+                shared.sizes = sizes[name]
                 results[name] = run_section(name, shared)
                 failed = f" FAILED {results[name].error}" if results[name].error else ""
                 print(f"[bench] {name}: {results[name].seconds:.1f} s{failed}", file=sys.stderr, flush=True)
@@ -122,7 +140,7 @@ def main(argv: list[str] | None = None) -> int:
         "options": {"device": device, "sizes": args.sizes, "repeats": args.repeats, "warmup": args.warmup,
                     "sections": sections, "oracle_backend": args.oracle_backend},
         "env": {**environment(device, threads), "glibc_heap_kept": heap_kept},
-        "sizes": {name: SIZES[args.sizes][name] for name in sections},
+        "sizes": {name: sizes[name] for name in sections},
         "sections": {name: r.as_dict() for name, r in results.items()},
     }
     print(to_markdown(doc))
