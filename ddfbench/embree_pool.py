@@ -18,13 +18,21 @@ import numpy as np
 import trimesh
 
 BLOCK = 1 << 20  # rays per pass through the shared block
+STARTUP_S = 300.0  # longest wait for every worker to start (imports, scene build); then BrokenBarrierError
 _WORKER: dict = {}  # the worker process's oracle
 
 
-def _init(vertices: np.ndarray, faces: np.ndarray) -> None:
+def _init(vertices: np.ndarray, faces: np.ndarray, barrier) -> None:
     from ddfbench.oracle import Oracle
 
     _WORKER["oracle"] = Oracle(trimesh.Trimesh(vertices, faces, process=False), "embree")
+    _WORKER["barrier"] = barrier
+
+
+def _ready(_: int) -> int:
+    """Wait until every worker holds one of these jobs (each has started and built its scene); its pid."""
+    _WORKER["barrier"].wait(timeout=STARTUP_S)
+    return os.getpid()
 
 
 def _cast(job: tuple[str, int, int]) -> None:
@@ -43,16 +51,19 @@ class EmbreePool:
     """hit_distance like Oracle's (embree backend), cast by `workers` processes (default: the cores this process
     may run on). A worker that fails to start or dies ends the call with BrokenProcessPool, never a hang.
 
-    The workers build their scenes as the pool starts, so a first call may wait for them (the bench's untimed
-    cold call); close() ends the workers and frees the block."""
+    The constructor returns once every worker has started and built its scene (pids: their process ids): on
+    an H100 machine's 16 cores a pool still starting made the first timed calls ~30x slower than later ones
+    (reports/bench/cuda/README.md). close() ends the workers and frees the block."""
 
     def __init__(self, mesh: trimesh.Trimesh, workers: int | None = None):
         from ddfbench.oracle import Oracle
 
         Oracle(mesh, "embree")  # a broken embreex fails here, in this process, with its own message
         self.workers = int(workers or (len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()))
-        self._pool = ProcessPoolExecutor(self.workers, mp.get_context("spawn"), _init,
-                                         (np.asarray(mesh.vertices, np.float64), np.asarray(mesh.faces, np.int64)))
+        ctx = mp.get_context("spawn")
+        self._pool = ProcessPoolExecutor(self.workers, ctx, _init, (np.asarray(mesh.vertices, np.float64),
+                                                                    np.asarray(mesh.faces, np.int64), ctx.Barrier(self.workers)))
+        self.pids = set(self._pool.map(_ready, range(self.workers)))
         self._shm = shared_memory.SharedMemory(create=True, size=BLOCK * 7 * 4)
         self._rays = np.ndarray((BLOCK, 7), np.float32, buffer=self._shm.buf)
 

@@ -158,12 +158,13 @@ def test_warp_oracle_needs_no_open3d(tmp_path):
 
 def test_embree_pool_equals_the_embree_oracle(bunny, rng):
     """embreex in worker processes (Embree on every core without open3d) gives the single-process answers, the
-    empty call included."""
+    empty call included; the pool is built with every worker started (3 on 2 cores: one waits its turn)."""
     from ddfbench.embree_pool import EmbreePool
 
     o, d = random_rays(rng, 20001)
-    pool = EmbreePool(bunny.mesh, workers=2)
+    pool = EmbreePool(bunny.mesh, workers=3)
     try:
+        assert len(pool.pids) == 3
         t = pool.hit_distance(o, d)
         assert np.isfinite(t).mean() > 0.1
         assert np.array_equal(t, Oracle(bunny.mesh, "embree").hit_distance(o, d))
