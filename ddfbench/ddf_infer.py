@@ -25,8 +25,8 @@ class DDFDepth:
 
     rep: a fitted DDF; precision: fp32 | bf16 | fp16 (autocast); compiled: torch.compile the per-chunk
     function (mode "default"; dynamic shapes, so the last, shorter chunk does not recompile);
-    fused: the MLP as one Triton kernel (ddfbench.ddf_fused; bf16 only), with compiled the box entry and
-    encoding before it and the hit rule after it compiled;
+    fused: the MLP as one Triton kernel (ddfbench.ddf_fused; bf16 only); with compiled too, the box entry and
+    encoding before the kernel and the hit rule after it are compiled;
     chunk: rays per network call (bounds the activations: ~chunk * width * 4 bytes per layer).
     The hit rule is DDF.intersect's: visible, not nearer than min_hit_distance, not beyond the box exit.
     """

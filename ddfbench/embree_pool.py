@@ -63,7 +63,11 @@ class EmbreePool:
         ctx = mp.get_context("spawn")
         self._pool = ProcessPoolExecutor(self.workers, ctx, _init, (np.asarray(mesh.vertices, np.float64),
                                                                     np.asarray(mesh.faces, np.int64), ctx.Barrier(self.workers)))
-        self.pids = set(self._pool.map(_ready, range(self.workers)))
+        try:
+            self.pids = set(self._pool.map(_ready, range(self.workers)))
+        except BaseException:  # a worker that died or never came (BrokenBarrierError), or a stop: no pool left behind
+            self._pool.shutdown(wait=False, cancel_futures=True)
+            raise
         self._shm = shared_memory.SharedMemory(create=True, size=BLOCK * 7 * 4)
         self._rays = np.ndarray((BLOCK, 7), np.float32, buffer=self._shm.buf)
 

@@ -176,6 +176,7 @@ def environment(device: str, threads: int) -> dict[str, Any]:
     return {
         "git_sha": _git_sha(),
         "code_sha": code_sha(),
+        "git_sha_from": GIT_SHA_ENV if os.environ.get(GIT_SHA_ENV) else "git",
         "versions": {"python": platform.python_version(), "torch": torch.__version__, "numpy": numpy.__version__,
                      "trimesh": trimesh.__version__, **{name: _installed(name) for name in OPTIONAL}},
         "device": device,

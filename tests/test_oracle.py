@@ -158,7 +158,7 @@ def test_warp_oracle_needs_no_open3d(tmp_path):
 
 def test_embree_pool_equals_the_embree_oracle(bunny, rng):
     """embreex in worker processes (Embree on every core without open3d) gives the single-process answers, the
-    empty call included; the pool is built with every worker started (3 on 2 cores: one waits its turn)."""
+    empty call included; the pool is built with every worker started (3 workers on 2 cores)."""
     from ddfbench.embree_pool import EmbreePool
 
     o, d = random_rays(rng, 20001)

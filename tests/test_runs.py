@@ -87,7 +87,8 @@ def test_a_copied_tree_names_its_commit_through_the_environment(monkeypatch):
 
     monkeypatch.setattr(runs, "_git", lambda *args: "stale")
     monkeypatch.delenv(runs.GIT_SHA_ENV, raising=False)
-    assert runs.environment("cpu", 1)["git_sha"] == "stale" == runs.code_sha()
+    env = runs.environment("cpu", 1)
+    assert env["git_sha"] == "stale" == runs.code_sha() and env["git_sha_from"] == "git"
     monkeypatch.setenv(runs.GIT_SHA_ENV, "0123abc")
     env = runs.environment("cpu", 1)
-    assert env["git_sha"] == env["code_sha"] == "0123abc"
+    assert env["git_sha"] == env["code_sha"] == "0123abc" and env["git_sha_from"] == "DDFBENCH_GIT_SHA"

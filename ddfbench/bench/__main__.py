@@ -16,6 +16,7 @@ import os
 import signal
 import sys
 import tempfile
+import threading
 import time
 
 import torch
@@ -27,7 +28,7 @@ from ddfbench.bench.context import Context
 from ddfbench.bench.results import SectionResult
 from ddfbench.bench.sizes import SIZES
 from ddfbench.bench.table import to_markdown, write
-from ddfbench.errors import InputError
+from ddfbench.errors import InputError, one_line
 from ddfbench.runs import environment
 from ddfbench.train import resolve_device
 
@@ -40,11 +41,13 @@ def parse_sections(text: str) -> list[str]:
     return [s for s in SECTIONS if s in names]
 
 
-class Stopped(Exception):
-    """SIGTERM arrived (a timeout, a job scheduler): the section stops, and what it measured is written."""
+class Stopped(BaseException):
+    """SIGTERM arrived (a timeout, a job scheduler): the section stops, and what it measured is written. A
+    BaseException, so that a section's own `except Exception` (a family that failed, a run) does not swallow it."""
 
 
 def _stop(signum, frame) -> None:
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)  # one stop is enough: a second SIGTERM must not cut the report
     raise Stopped("SIGTERM: the bench was stopped midway")
 
 
@@ -55,10 +58,9 @@ def run_section(name: str, ctx: Context) -> SectionResult:
     ctx.partial = None
     try:
         result = importlib.import_module(f"ddfbench.bench.{name}").run(ctx)
-    except Exception as err:  # the other sections still run; the exit code says something failed
-        first = (str(err).strip().splitlines() or [""])[0]
+    except (Exception, Stopped) as err:  # the other sections still run (unless stopped); the exit code says so
         result = ctx.partial or SectionResult()
-        result.error = f"{type(err).__name__}: {first}"
+        result.error = one_line(err)
     result.seconds = time.perf_counter() - start
     return result
 
@@ -76,12 +78,18 @@ def sized(sizes: dict, settings: list[str]) -> dict:
     return out
 
 
-def report_name(device: str, sizes: str) -> str:
-    """bench-cpu-<sizes>, or on CUDA bench-cuda-<gpu> (e.g. bench-cuda-nvidia-h100-80gb-hbm3; -<sizes> unless default)."""
+def _slug(text: str) -> str:
+    return "-".join(filter(None, "".join(c if c.isalnum() else "-" for c in text.lower()).split("-")))
+
+
+def report_name(device: str, sizes: str, settings: list[str] = ()) -> str:
+    """bench-cpu-<sizes>, or on CUDA bench-cuda-<gpu> (e.g. bench-cuda-nvidia-h100-80gb-hbm3; -<sizes> unless
+    default); then each --set, so that a changed run does not overwrite the plain one (…-race-capacities-false)."""
     if not device.startswith("cuda"):
-        return f"bench-cpu-{sizes}"
-    gpu = "".join(c if c.isalnum() else "-" for c in torch.cuda.get_device_name(torch.device(device)).lower())
-    return "-".join(["bench-cuda", "-".join(filter(None, gpu.split("-")))] + ([sizes] if sizes != "default" else []))
+        parts = [f"bench-cpu-{sizes}"]
+    else:
+        parts = ["bench-cuda", _slug(torch.cuda.get_device_name(torch.device(device)))] + ([sizes] if sizes != "default" else [])
+    return "-".join(parts + [_slug(text) for text in settings])
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -120,7 +128,8 @@ def main(argv: list[str] | None = None) -> int:
     started, t0 = dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds"), time.perf_counter()
     load = round(os.getloadavg()[0], 2) if hasattr(os, "getloadavg") else None
     results: dict[str, SectionResult] = {}
-    previous = signal.signal(signal.SIGTERM, _stop)
+    main_thread = threading.current_thread() is threading.main_thread()  # signal handlers live there only
+    previous = signal.signal(signal.SIGTERM, _stop) if main_thread else None
     try:
         with tempfile.TemporaryDirectory(prefix="ddfbench-bench-") as workdir:
             shared = Context(device, {}, args.repeats, args.warmup, workdir, threads, oracle_backend=args.oracle_backend)
@@ -132,8 +141,11 @@ def main(argv: list[str] | None = None) -> int:
                 print(f"[bench] {name}: {results[name].seconds:.1f} s{failed}", file=sys.stderr, flush=True)
                 if results[name].error and results[name].error.startswith(Stopped.__name__):
                     break  # the sections not started are left out of the report
+    except Stopped:
+        pass  # stopped between sections: the report holds those that ran
     finally:
-        signal.signal(signal.SIGTERM, previous)
+        if main_thread:
+            signal.signal(signal.SIGTERM, previous)
     doc = {
         "command": " ".join(["python -m ddfbench.bench", *(argv if argv is not None else sys.argv[1:])]),
         "started": started, "total_s": time.perf_counter() - t0, "load_average_start": load,
@@ -144,7 +156,7 @@ def main(argv: list[str] | None = None) -> int:
         "sections": {name: r.as_dict() for name, r in results.items()},
     }
     print(to_markdown(doc))
-    md, js = write(doc, args.out, report_name(device, args.sizes))
+    md, js = write(doc, args.out, report_name(device, args.sizes, args.set))
     print(f"[bench] wrote {md} and {js}", file=sys.stderr)
     return 1 if any(r.error for r in results.values()) else 0
 

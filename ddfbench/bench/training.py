@@ -17,6 +17,7 @@ import torch
 from ddfbench.bench.context import Context, model_preset, preset
 from ddfbench.bench.results import Row, SectionResult, compare
 from ddfbench.bench.timing import measure, once, precisions
+from ddfbench.errors import one_line
 from ddfbench.models import learned_families, load_family
 from ddfbench.representation import Budget, FitData
 from ddfbench.sampling import line_hits, surface
@@ -91,7 +92,7 @@ def run(ctx: Context) -> SectionResult:
         try:
             result.rows += family_rows(ctx, family, samples_by_kind, result.details)
         except Exception as err:  # one family's failure leaves the others' figures standing
-            result.notes.append(f"{family}: failed, {type(err).__name__}: {(str(err).splitlines() or [''])[0]}")
+            result.notes.append(f"{family}: failed, {one_line(err)}")
     if not result.rows:
         raise RuntimeError("no family was measured: " + "; ".join(result.notes))
     return result
