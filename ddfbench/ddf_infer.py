@@ -44,10 +44,10 @@ class DDFDepth:
         if fused:
             from ddfbench.ddf_fused import FusedMLP
 
-            self._mlp = FusedMLP(rep.net)
-            self._pre, self._post = self._fused_inputs, self._answer
+            self.mlp = FusedMLP(rep.net)  # the fused path's three parts (ddfbench.bench.fused_parts times each)
+            self.encode, self.finish = self._fused_inputs, self._answer
             if compiled:
-                self._pre, self._post = torch.compile(self._pre, dynamic=True), torch.compile(self._post, dynamic=True)
+                self.encode, self.finish = torch.compile(self.encode, dynamic=True), torch.compile(self.finish, dynamic=True)
             step = self._fused_depth
         elif compiled:
             step = torch.compile(step, dynamic=True)
@@ -64,11 +64,11 @@ class DDFDepth:
         """The fused kernel's input (N, K0) bf16, and the ray coordinate and box entry the answer needs."""
         t_entry, t_exit, meets = box_entry(o, d, self.rep.domain)
         feats, s0 = self.rep.net.features(o + t_entry[:, None] * d, d)
-        return self._mlp.pad(feats), s0, t_entry, t_exit, meets
+        return self.mlp.pad(feats), s0, t_entry, t_exit, meets
 
     def _fused_depth(self, o: torch.Tensor, d: torch.Tensor) -> torch.Tensor:
-        x, s0, t_entry, t_exit, meets = self._pre(o, d)
-        return self._post(self._mlp(x), s0, t_entry, t_exit, meets)
+        x, s0, t_entry, t_exit, meets = self.encode(o, d)
+        return self.finish(self.mlp(x), s0, t_entry, t_exit, meets)
 
     def _answer(self, y: torch.Tensor, s0, t_entry, t_exit, meets) -> torch.Tensor:
         dist, logit = self.rep.net.outputs(y, s0)

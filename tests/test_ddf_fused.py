@@ -6,6 +6,7 @@ before the kernel is defined). Without either the tests skip.
 """
 
 import importlib.util
+import json
 import os
 import subprocess
 import sys
@@ -129,3 +130,21 @@ def test_what_is_not_fused_is_refused():
         FusedMLP(DDF({**base, "width": 512}).net)
     with pytest.raises(ValueError, match="bf16 only"):
         DDFDepth(DDF(base), "fp32", fused=True)
+
+
+@pytest.mark.gpu
+def test_fused_parts_times_every_part_and_counts_the_kernel_flops(tmp_path):
+    """python -m ddfbench.bench.fused_parts: each part timed, the kernel's FLOPs those of ddf_tuned's padded layers."""
+    if not needs_a_kernel_runner("test_fused_parts_times_every_part_and_counts_the_kernel_flops"):
+        return
+    from ddfbench.bench.fused_parts import main
+
+    out = tmp_path / "parts.json"
+    assert main(["--device", DEVICE, "--rays", "700", "--repeats", "1", "--out", str(out)]
+                + ([] if CUDA else ["--eager"])) == 0  # a CPU compile takes minutes
+    doc = json.loads(out.read_text())
+    # ddf_tuned: 4 position + 3 direction channels, 5 and 1 octaves -> 53 inputs, padded to 64; 128 x 4; 2 outputs
+    assert doc["flops_per_ray"] == 2 * (64 * 128 + 3 * 128 * 128 + 128 * 2)
+    for part in ("encode", "kernel", "finish", "whole", "bare_bf16", "gemm_bf16"):
+        assert doc[part]["median_s"] > 0 and doc[part]["rays_per_s"] > 0, part
+    assert doc["kernel"]["tflops"] > 0 and doc["gemm_bf16"]["tflops"] > 0
