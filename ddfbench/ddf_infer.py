@@ -25,23 +25,30 @@ class DDFDepth:
 
     rep: a fitted DDF; precision: fp32 | bf16 | fp16 (autocast); compiled: torch.compile the per-chunk
     function (mode "default"; dynamic shapes, so the last, shorter chunk does not recompile);
-    fused: the MLP as one Triton kernel (ddfbench.ddf_fused; bf16 only); with compiled too, the box entry and
-    encoding before the kernel and the hit rule after it are compiled;
+    fused (bf16 only, ddfbench.ddf_fused): "mlp": the MLP as one Triton kernel, the box entry and encoding
+    before it and the hit rule after it in torch (compiled with compiled); "depth": the whole answer as one
+    kernel (compiled does not apply);
     chunk: rays per network call (bounds the activations: ~chunk * width * 4 bytes per layer).
     The hit rule is DDF.intersect's: visible, not nearer than min_hit_distance, not beyond the box exit.
     """
 
     def __init__(self, rep: DDF, precision: str = "fp32", compiled: bool = False, chunk: int = 1 << 20,
-                 fused: bool = False):
+                 fused: str | None = None):
         if precision not in PRECISIONS:
             raise ValueError(f"DDF precision '{precision}': unknown ({' | '.join(PRECISIONS)})")
+        if fused not in (None, "mlp", "depth"):
+            raise ValueError(f"DDF fused '{fused}': unknown (mlp | depth)")
         if fused and precision != "bf16":
-            raise ValueError(f"DDF precision '{precision}': the fused MLP computes in bf16 only")
+            raise ValueError(f"DDF precision '{precision}': the fused kernels compute in bf16 only")
         self.rep, self.precision, self.chunk = rep, precision, int(chunk)
         self.device = next(rep.net.parameters()).device
         rep.net.eval()
         step: Callable[[torch.Tensor, torch.Tensor], torch.Tensor] = self._chunk_depth
-        if fused:
+        if fused == "depth":
+            from ddfbench.ddf_fused import FusedDepth
+
+            step = FusedDepth(rep)
+        elif fused == "mlp":
             from ddfbench.ddf_fused import FusedMLP
 
             self.mlp = FusedMLP(rep.net)  # the fused path's three parts (ddfbench.bench.fused_parts times each)

@@ -58,6 +58,19 @@ def layerwise_bf16(net, feats: torch.Tensor) -> torch.Tensor:
     return h @ net.out.weight.to(torch.bfloat16).float().t() + net.out.bias.float()
 
 
+def balance_hits(rep: DDF, o: torch.Tensor, d: torch.Tensor) -> None:
+    """Shift rep's output biases so that the rays o + t d meeting the box get distances around half their chord
+    and (the visibility head) about half of them count as visible."""
+    from ddfbench.geometry import box_entry
+
+    t_entry, t_exit, meets = box_entry(o, d, rep.domain)
+    with torch.no_grad():
+        dist, logit = rep.net(o[meets] + t_entry[meets, None] * d[meets], d[meets])
+        rep.net.out.bias[0] -= (dist - (t_exit - t_entry)[meets] / 2).median()
+        if logit is not None:
+            rep.net.out.bias[1] -= logit.median()
+
+
 def run_interpreted(test: str) -> None:
     """Run this file's test `test` in a subprocess under Triton's CPU interpreter."""
     env = {**os.environ, "TRITON_INTERPRET": "1"}
@@ -108,7 +121,7 @@ def test_fused_depth_answers_like_the_bf16_depth():
     rep = random_rep(128, 4, 5, 1, {})
     o, d = rays(3000, seed=2)
     t_ref = DDFDepth(rep, "fp32", chunk=1024)(o, d)
-    t_fused = DDFDepth(rep, "bf16", fused=True, chunk=1024)(o, d)
+    t_fused = DDFDepth(rep, "bf16", fused="mlp", chunk=1024)(o, d)
     hit, ref_hit = torch.isfinite(t_fused), torch.isfinite(t_ref)
     assert ref_hit.float().mean() > 0.1  # the random network answers "hit" on ~18 % of these rays
     assert (hit == ref_hit).float().mean() > 0.97
@@ -116,8 +129,74 @@ def test_fused_depth_answers_like_the_bf16_depth():
     assert (t_fused[both] - t_ref[both]).abs().mean() < 0.02
 
 
+@pytest.mark.gpu
+@pytest.mark.parametrize("shape", NETWORKS, ids=IDS)
+def test_one_kernel_depth_answers_like_the_fused_mlp_between_torch_passes(shape):
+    """FusedDepth (box entry, encoding, MLP and hit rule in one kernel) against DDFDepth(fused="mlp") (the
+    same MLP kernel, the rest in torch) and the fp32 answer, on rays from inside and outside the box."""
+    if not needs_a_kernel_runner(f"test_one_kernel_depth_answers_like_the_fused_mlp_between_torch_passes[{IDS[NETWORKS.index(shape)]}]"):
+        return
+    from ddfbench.ddf_infer import DDFDepth
+
+    rep = random_rep(*shape)
+    o, d = rays(1500, seed=3)
+    o = o * 1.5  # a third of the origins outside the box: some rays miss it or have it behind them
+    balance_hits(rep, o, d)
+    t_one = DDFDepth(rep, "bf16", fused="depth", chunk=1000)(o, d)  # two chunks, the second masked
+    t_mlp = DDFDepth(rep, "bf16", fused="mlp", chunk=1000)(o, d)
+    t_ref = DDFDepth(rep, "fp32", chunk=1000)(o, d)
+    hit, mlp_hit, ref_hit = torch.isfinite(t_one), torch.isfinite(t_mlp), torch.isfinite(t_ref)
+    assert t_one.shape == (1500,) and not t_one.isnan().any()
+    assert 0.05 < ref_hit.float().mean() < 0.95
+    # the same arithmetic but for the order of fp32 operations before the bf16 rounding of the inputs
+    assert (hit == mlp_hit).float().mean() > 0.99
+    assert (t_one[hit & mlp_hit] - t_mlp[hit & mlp_hit]).abs().mean() < 2e-3
+    assert (hit == ref_hit).float().mean() > 0.97
+    assert (t_one[hit & ref_hit] - t_ref[hit & ref_hit]).abs().mean() < 0.02
+
+
+@pytest.mark.gpu
+@pytest.mark.parametrize("param", ["ray", "point"])
+def test_one_kernel_depth_keeps_the_box_and_hit_rule(param):
+    """A network that answers distance c and "visible" everywhere (zero weights, output biases (c, 5)): the
+    kernel's t is the box entry + c (ray: + c - s0, s0 = x.d at the entry) where that lies in the box and past
+    min_hit_distance, else inf; rays with zero direction components and origins on faces included."""
+    if not needs_a_kernel_runner(f"test_one_kernel_depth_keeps_the_box_and_hit_rule[{param}]"):
+        return
+    import numpy as np
+
+    from ddfbench.ddf_fused import FusedDepth
+    from ddfbench.geometry import box_entry
+
+    rep = random_rep(64, 2, 3, 1, {"param": param})
+    with torch.no_grad():
+        for m in [*rep.net.body, rep.net.out]:
+            if isinstance(m, nn.Linear):
+                m.weight.zero_()
+                m.bias.zero_()
+        rep.net.out.bias.copy_(torch.tensor([0.3, 5.0]))
+    o, d = rays(600, seed=4)
+    o = o * 1.4
+    h = rep.domain
+    o[:6] = torch.tensor([[h, 0.0, 0.0], [-h, 0.3, 0.2], [0.0, h, -h], [0.2, 0.1, 2.0], [0.5, -0.5, 0.0], [2.0, 2.0, 2.0]])
+    d[:6] = torch.tensor([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, 0.0, -1.0], [0.0, 0.0, 1.0], [0.0, 0.0, 1.0]])
+    t = FusedDepth(rep)(o, d).cpu().double().numpy()
+    o64, d64 = o.cpu().double().numpy(), d.cpu().double().numpy()
+    t_entry, t_exit, meets = box_entry(o64, d64, float(np.float32(h)))  # the box as fp32 sees it: faces included
+    x = o64 + np.where(meets, t_entry, 0.0)[:, None] * d64
+    s0 = (x * d64).sum(1)
+    dist = np.maximum(0.3 - s0, 0.0) if param == "ray" else np.full(len(o64), 0.3)
+    want = t_entry + dist
+    want = np.where(meets & (want > float(rep.cfg["min_hit_distance"])) & (want <= t_exit), want, np.inf)
+    # bf16 output head: c and 5 are exact; s0 enters in fp32
+    assert np.array_equal(np.isinf(t), np.isinf(want)), np.flatnonzero(np.isinf(t) != np.isinf(want))[:10]
+    assert 0.05 < np.isfinite(want).mean() < 0.95
+    fin = np.isfinite(want)
+    assert np.abs(t[fin] - want[fin]).max() < 1e-5
+
+
 def test_what_is_not_fused_is_refused():
-    from ddfbench.ddf_fused import FusedMLP, supported
+    from ddfbench.ddf_fused import FusedDepth, FusedMLP, supported, supported_depth
     from ddfbench.ddf_infer import DDFDepth
 
     base = model_preset("ddf_tuned")
@@ -126,10 +205,16 @@ def test_what_is_not_fused_is_refused():
     assert "width 512" in supported(DDF({**base, "width": 512}).net)
     assert "width 32" in supported(DDF({**base, "width": 32}).net)
     assert "line grid" in supported(DDF({**base, "line_grid_points": 4}).net)
+    assert "angles" in supported_depth(DDF({**base, "direction": "angles"}).net)
+    assert supported_depth(DDF(base).net) is None and "width 512" in supported_depth(DDF({**base, "width": 512}).net)
     with pytest.raises(ValueError, match="width 512"):
         FusedMLP(DDF({**base, "width": 512}).net)
+    with pytest.raises(ValueError, match="angles"):
+        FusedDepth(DDF({**base, "direction": "angles"}))
     with pytest.raises(ValueError, match="bf16 only"):
-        DDFDepth(DDF(base), "fp32", fused=True)
+        DDFDepth(DDF(base), "fp32", fused="depth")
+    with pytest.raises(ValueError, match="fused 'yes'"):
+        DDFDepth(DDF(base), "bf16", fused="yes")
 
 
 @pytest.mark.gpu
@@ -145,6 +230,7 @@ def test_fused_parts_times_every_part_and_counts_the_kernel_flops(tmp_path):
     doc = json.loads(out.read_text())
     # ddf_tuned: 4 position + 3 direction channels, 5 and 1 octaves -> 53 inputs, padded to 64; 128 x 4; 2 outputs
     assert doc["flops_per_ray"] == 2 * (64 * 128 + 3 * 128 * 128 + 128 * 2)
-    for part in ("encode", "kernel", "finish", "whole", "bare_bf16", "gemm_bf16"):
+    for part in ("encode", "kernel", "finish", "whole", "depth_kernel", "bare_bf16", "gemm_bf16"):
         assert doc[part]["median_s"] > 0 and doc[part]["rays_per_s"] > 0, part
-    assert doc["kernel"]["tflops"] > 0 and doc["gemm_bf16"]["tflops"] > 0
+    assert doc["kernel"]["tflops"] > 0 and doc["gemm_bf16"]["tflops"] > 0 and doc["depth_kernel"]["tflops"] > 0
+    assert set(doc["configs"]) == {"mlp", "depth"} and all("BLOCK" in c for c in doc["configs"].values())

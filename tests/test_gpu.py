@@ -106,7 +106,8 @@ def test_ddf_device_depth_in_reduced_precision_and_compiled(fits):
     variants = {"fp32": DDFDepth(rep, "fp32", chunk=700), "bf16": DDFDepth(rep, "bf16", chunk=700)}
     if DEVICE.startswith("cuda"):  # a CPU compile takes minutes on a small machine
         variants["bf16 compiled"] = DDFDepth(rep, "bf16", compiled=True, chunk=700)
-        variants["bf16 fused, compiled"] = DDFDepth(rep, "bf16", compiled=True, fused=True, chunk=700)
+        variants["bf16 fused MLP, compiled"] = DDFDepth(rep, "bf16", compiled=True, fused="mlp", chunk=700)
+        variants["bf16 fused depth"] = DDFDepth(rep, "bf16", fused="depth", chunk=700)
     for name, depth in variants.items():
         t = depth(od, dd).cpu().numpy()
         assert not np.isnan(t).any(), name

@@ -6,11 +6,13 @@ does not depend on them) on N incoherent rays, it times:
 - `encode`: the compiled box entry + encoding pass before the kernel (writes the kernel's (N, K0) bf16 input);
 - `kernel`: the Triton MLP (ddfbench.ddf_fused);
 - `finish`: the compiled hit rule after it;
-- `whole`: DDFDepth(fused=True, compiled=True), chunked as the race does;
+- `whole`: DDFDepth(fused="mlp", compiled=True): the three parts, chunked as the race does;
+- `depth_kernel`: DDFDepth(fused="depth"): the whole answer as one kernel (box entry, encoding, MLP, hit rule);
 - `bare_bf16`: the network's layer-by-layer forward under bf16 autocast, on the same inputs;
 - `gemm_bf16`: one (N, K) x (K, width) bf16 product with K chosen so that it does the MLP's FLOPs: what the
   device's matrix units give at this kind of shape.
-Each part's rays/s and, for the kernel and the product, TFLOP/s (2 x multiply-adds of the padded layers).
+Each part's rays/s and, for the kernels and the product, TFLOP/s (2 x multiply-adds of the padded layers), and the
+block size and warps the autotuner chose for each kernel.
 Needs CUDA and Triton (or TRITON_INTERPRET=1 on the CPU, for a check of the script itself).
 """
 
@@ -38,9 +40,12 @@ def kernel_flops(mlp) -> int:
 def parts(device: str, rays: int, repeats: int, compiled: bool = True, chunk: int = 1 << 21, seed: int = 0) -> dict:
     """{part: {"median_s", "iqr_s", "rays_per_s", "tflops"?}, "n_rays", "flops_per_ray", ...} for N = rays
     (compiled: the passes around the kernel through torch.compile, as the race runs them)."""
+    from ddfbench.ddf_fused import config  # needs Triton: imported once the caller has checked
+
     torch.manual_seed(seed)
     rep = DDF(model_preset("ddf_tuned")).to(device)
-    depth = DDFDepth(rep, "bf16", compiled=compiled, fused=True, chunk=chunk)
+    depth = DDFDepth(rep, "bf16", compiled=compiled, fused="mlp", chunk=chunk)
+    one_kernel = DDFDepth(rep, "bf16", fused="depth", chunk=chunk)
     mlp = depth.mlp
     o, d = (torch.as_tensor(a, device=device) for a in incoherent_rays(rays, seed=seed + 1))
     x, s0, t_entry, t_exit, meets = depth.encode(o, d)
@@ -58,13 +63,15 @@ def parts(device: str, rays: int, repeats: int, compiled: bool = True, chunk: in
 
     fns = {"encode": lambda: depth.encode(o, d), "kernel": lambda: mlp(x),
            "finish": lambda: depth.finish(y, s0, t_entry, t_exit, meets), "whole": lambda: depth(o, d),
+           "depth_kernel": lambda: one_kernel(o, d),
            "bare_bf16": bare, "gemm_bf16": lambda: a @ b}
     out = {"n_rays": rays, "flops_per_ray": flops, "device": device, "compiled": compiled,
            "gpu": torch.cuda.get_device_name(torch.device(device)) if device.startswith("cuda") else None}
     for name, (_, timing) in measure_side_by_side(fns, repeats, 1, device=device).items():
         out[name] = {"median_s": timing.median_s, "iqr_s": timing.iqr_s, "rays_per_s": timing.rate(rays)}
-        if name in ("kernel", "gemm_bf16"):
-            out[name]["tflops"] = timing.rate(rays) * (flops if name == "kernel" else 2 * k * mlp.width) / 1e12
+        if name in ("kernel", "depth_kernel", "gemm_bf16"):
+            out[name]["tflops"] = timing.rate(rays) * (2 * k * mlp.width if name == "gemm_bf16" else flops) / 1e12
+    out["configs"] = {"mlp": config("mlp"), "depth": config("depth")}  # both last tuned on these N rays
     return out
 
 
@@ -81,9 +88,10 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     result = parts(args.device, args.rays, args.repeats, compiled=not args.eager)
     for name, v in result.items():
-        if isinstance(v, dict):
+        if isinstance(v, dict) and "median_s" in v:
             extra = f"  {v['tflops']:.1f} TFLOP/s" if "tflops" in v else ""
             print(f"{name:10s} {v['median_s'] * 1e3:9.3f} ms  {v['rays_per_s']:.3g} rays/s{extra}")
+    print(f"autotuned: {result['configs']}")
     if args.out:
         with open(args.out, "w") as fh:
             json.dump(result, fh, indent=1)

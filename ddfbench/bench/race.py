@@ -4,8 +4,9 @@ claim, measured where it is about: `--device cuda`).
 
 Contestants, all answering first-hit depth (no normals) for the same rays:
 - DDF (conf/model/ddf_tuned.yaml, the preset the experiments compare, trained `fit_seconds`): ddfbench.ddf_infer.DDFDepth on the device in fp32,
-  bf16 autocast and bf16 compiled (torch.compile; only with `compile: true`), and on CUDA the MLP as one
-  Triton kernel (ddf_bf16_fused, checked against bf16 first); the rows name the fastest, as measured; beside
+  bf16 autocast and bf16 compiled (torch.compile; only with `compile: true`), and on CUDA with Triton the MLP
+  as one kernel between compiled passes (ddf_bf16_fused) and the whole answer as one kernel
+  (ddf_bf16_fused_depth), each checked against bf16 first; the rows name the fastest, as measured; beside
   it the bare network forward on the same box-entry points (what answering has to cost at least);
 - Warp BVH (ddfbench.warp_cast) on the same device, rays already there;
 - Embree on every CPU core, numpy rays on the host: open3d's RaycastingScene through the oracle, or with
@@ -94,21 +95,26 @@ def bare_forward(rep: DDF, o: torch.Tensor, d: torch.Tensor, chunk: int, precisi
 
 
 def ddf_variants(ctx: Context, rep: DDF, compile_too: bool, details: dict | None = None) -> dict[str, DDFDepth]:
-    """fp32, bf16 and (with compile_too and sizes `compile`) bf16 compiled and, on CUDA with Triton, the
-    bf16 fused MLP (ddfbench.ddf_fused, its box entry and hit rule compiled) of rep. A variant that cannot
-    be built or answers 4096 rays unlike bf16 is left out, with why in details[name]."""
+    """fp32, bf16, with compile_too and sizes `compile` bf16 compiled and, on CUDA with Triton, the fused kernels
+    of ddfbench.ddf_fused: with compile_too the MLP kernel between compiled passes (ddf_bf16_fused) and always
+    the one-kernel depth (ddf_bf16_fused_depth). A variant that cannot be built or answers 4096 rays unlike bf16
+    is left out, with why in details[name]."""
     chunk = int(ctx.sizes["chunk"])
     out = {"ddf_fp32": DDFDepth(rep, "fp32", chunk=chunk), "ddf_bf16": DDFDepth(rep, "bf16", chunk=chunk)}
-    if compile_too and ctx.sizes.get("compile"):
+    compiling = compile_too and ctx.sizes.get("compile")
+    if compiling:
         out["ddf_bf16_compiled"] = DDFDepth(rep, "bf16", compiled=True, chunk=chunk)
-        if ctx.device.startswith("cuda") and importlib.util.find_spec("triton") is not None:
+    if ctx.device.startswith("cuda") and importlib.util.find_spec("triton") is not None:
+        for name, fused in (("ddf_bf16_fused", "mlp"), ("ddf_bf16_fused_depth", "depth")):
+            if fused == "mlp" and not compiling:
+                continue
             try:
-                fused = DDFDepth(rep, "bf16", compiled=True, chunk=chunk, fused=True)
-                _check_against(fused, out["ddf_bf16"], ctx.device)
-                out["ddf_bf16_fused"] = fused
+                variant = DDFDepth(rep, "bf16", compiled=fused == "mlp", chunk=chunk, fused=fused)
+                _check_against(variant, out["ddf_bf16"], ctx.device)
+                out[name] = variant
             except Exception as err:  # the race goes on without it; the JSON says why
                 if details is not None:
-                    details["ddf_bf16_fused"] = f"not run: {one_line(err)}"
+                    details[name] = f"not run: {one_line(err)}"
     return out
 
 
@@ -219,6 +225,10 @@ def _race_all(ctx: Context, result: SectionResult, samples, ddf, nsdf, gsdf, war
             result.rows.append(compare("race", f"{set_name}: DDF ({best}) rays/s", timed[best][1].rate(n), "rays/s",
                                        "goal 1e9 rays/s (H100/H200, 1M+ rays)", 1e9, device=ctx.device,
                                        threads=ctx.threads, precision=_precision(best), target=SPEED_GOAL))
+    if any(name.startswith("ddf_bf16_fused") for name in variants):  # last tuned on the 1M incoherent rays
+        from ddfbench.ddf_fused import config
+
+        result.details["fused_kernel_config"] = {"mlp": config("mlp"), "depth": config("depth")}
     sweep(ctx, variants, best, warp, embree, result)
     if s.get("capacities", True):
         capacities(ctx, samples, ray_sets["primary"], reference, result)
@@ -276,8 +286,9 @@ def sweep(ctx: Context, variants: dict[str, DDFDepth], best_name: str, warp, emb
 
 
 def capacities(ctx: Context, samples, primary, reference: Callable, result: SectionResult) -> dict[str, dict]:
-    """The Pareto sweep's four DDF capacities, each trained fit_seconds: rays/s (fp32, bf16; not compiled:
-    a compile per network costs more device time than it tells) and accuracy."""
+    """The Pareto sweep's four DDF capacities, each trained fit_seconds: rays/s (fp32, bf16 and on CUDA the
+    one-kernel depth where the network fits it; not compiled: a compile per network costs more device time than
+    it tells) and accuracy; the rows name the fastest bf16 variant."""
     o_np, d_np = primary
     t_ref, out = reference(o_np, d_np), result.details.setdefault("capacities", {})  # filled as it goes
     for level, overrides in pareto_ddf_capacities().items():
@@ -285,7 +296,7 @@ def capacities(ctx: Context, samples, primary, reference: Callable, result: Sect
         timed = race(ctx, o_np, d_np, {name: (lambda o, d, on, dn, f=f: f(o, d)) for name, f in ddf_variants(ctx, rep, False).items()})
         out[level] = {**info, **{name: {"rays_per_s": timing.rate(len(o_np)), **accuracy(t, t_ref)}
                                  for name, (t, timing) in timed.items()}}
-        best = list(timed)[-1]  # bf16
+        best = fastest(timed, [name for name in timed if name != "ddf_fp32"])
         result.rows.append(compare("race", f"capacity {level} ({info['width']}x{info['depth']}): DDF ({best}) rays/s",
                                    timed[best][1].rate(len(o_np)), "rays/s", "same network fp32 rays/s",
                                    timed["ddf_fp32"][1].rate(len(o_np)), device=ctx.device, threads=ctx.threads,
