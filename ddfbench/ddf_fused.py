@@ -57,11 +57,11 @@ def _fits(configs, named_args, **kwargs) -> list[triton.Config]:
     return [c for c in configs if c.kwargs["BLOCK"] * width <= 256 * 128]
 
 
-def _tuned(kernel):
-    """kernel autotuned over block size and warps per network shape and input size class (not interpreted)."""
+def _tuned(kernel, key: list[str]):
+    """kernel autotuned over block size and warps per key (network shape, input size class; not interpreted)."""
     if INTERPRETED:
         return kernel
-    return triton.autotune(configs=_configs(), key=["K0", "WIDTH", "HIDDEN", "N_OUT", "large"],
+    return triton.autotune(configs=_configs(), key=key,
                            prune_configs_by={"early_config_prune": _fits})(kernel)
 
 
@@ -115,7 +115,8 @@ def _mlp_kernel(x_ptr, w0_ptr, b0_ptr, wh_ptr, bh_ptr, wo_ptr, bo_ptr, y_ptr, n_
 
 @triton.jit
 def _slab(o, d, half):
-    """(enter, leave) (BLOCK,) of one axis of the closed box [-half, half] (geometry.ray_box's rule)."""
+    """(enter, leave) (BLOCK,) of one axis of the closed box [-half, half] (geometry.ray_box's rule; on NVIDIA
+    the division may round differently, moving t by an ulp or two)."""
     flat = d == 0.0
     inv = 1.0 / tl.where(flat, 1.0, d)
     t0 = (-half - o) * inv
@@ -131,7 +132,8 @@ def _depth_kernel(o_ptr, d_ptr, chan_ptr, scale_ptr, phase_ptr, kind_ptr, w0_ptr
                   bo_ptr, t_ptr, n_rows, large, half, min_hit, clamp_hit,
                   K0: tl.constexpr, WIDTH: tl.constexpr, HIDDEN: tl.constexpr, N_OUT: tl.constexpr,
                   RAY: tl.constexpr, BLOCK: tl.constexpr, INTERP: tl.constexpr):
-    """t (n_rows,) fp32, the first hit of rays o + t d (o, unit d: (n_rows, 3) fp32), inf on a miss.
+    """t (n_rows,) fp32, the first hit of rays o + t d (o, unit d: (n_rows, 3) fp32), inf on a miss and for a ray
+    with a NaN component (as in torch, where the NaN reaches the answer; tl.minimum/maximum would drop it).
 
     Channels of a ray, from its box entry x = o + t_entry d: RAY: the foot point x - s0 d (3), s0 = x.d, d (3);
     else x (3), d (3). Encoding column i is channel chan[i] as given, or sin(channel * scale[i] + phase[i]), or 0
@@ -150,7 +152,7 @@ def _depth_kernel(o_ptr, d_ptr, chan_ptr, scale_ptr, phase_ptr, kind_ptr, w0_ptr
     ez, lz = _slab(oz, dz, half)
     t_exit = tl.minimum(tl.minimum(lx, ly), lz)
     t_entry = tl.maximum(tl.maximum(tl.maximum(ex, ey), ez), 0.0)
-    meets = t_exit >= t_entry
+    meets = (t_exit >= t_entry) & (ox == ox) & (oy == oy) & (oz == oz) & (dx == dx) & (dy == dy) & (dz == dz)
     xx, xy, xz = ox + t_entry * dx, oy + t_entry * dy, oz + t_entry * dz
     s0 = xx * dx + xy * dy + xz * dz
     if RAY:
@@ -169,7 +171,8 @@ def _depth_kernel(o_ptr, d_ptr, chan_ptr, scale_ptr, phase_ptr, kind_ptr, w0_ptr
     if INTERP:  # the interpreter has no fast sine
         wave = tl.sin(arg)
     else:
-        wave = libdevice.fast_sinf(arg)  # sin.approx: ~1e-6 absolute, far below the bf16 step of the input
+        # sin.approx: ~1e-6 absolute within +-100 pi, ~1e-4 at the ~1700 of 10 octaves: below the inputs' bf16 step
+        wave = libdevice.fast_sinf(arg)
     kind = tl.load(kind_ptr + k)[None, :]
     x = tl.where(kind == 0, v, tl.where(kind == 1, wave, 0.0)).to(tl.bfloat16)
     h = _body(x, w0_ptr, b0_ptr, wh_ptr, bh_ptr, K0, WIDTH, HIDDEN, INTERP)
@@ -186,7 +189,8 @@ def _depth_kernel(o_ptr, d_ptr, chan_ptr, scale_ptr, phase_ptr, kind_ptr, w0_ptr
     tl.store(t_ptr + rows, tl.where(hit, t, float("inf")), mask=live)
 
 
-_MLP, _DEPTH = _tuned(_mlp_kernel), _tuned(_depth_kernel)
+_SHAPE_KEY = ["K0", "WIDTH", "HIDDEN", "N_OUT", "large"]
+_MLP, _DEPTH = _tuned(_mlp_kernel, _SHAPE_KEY), _tuned(_depth_kernel, _SHAPE_KEY + ["RAY"])
 
 
 def supported(net: DDFNet) -> str | None:

@@ -58,17 +58,34 @@ def layerwise_bf16(net, feats: torch.Tensor) -> torch.Tensor:
     return h @ net.out.weight.to(torch.bfloat16).float().t() + net.out.bias.float()
 
 
-def balance_hits(rep: DDF, o: torch.Tensor, d: torch.Tensor) -> None:
-    """Shift rep's output biases so that the rays o + t d meeting the box get distances around half their chord
-    and (the visibility head) about half of them count as visible."""
+def box_rays(n: int, seed: int) -> tuple[torch.Tensor, torch.Tensor]:
+    """n rays that meet the field box: two thirds from origins inside it in random directions, a third from
+    origins 2.5 from the centre aimed at points inside it (so their box entry is not at the origin)."""
+    g = torch.Generator().manual_seed(seed)
+    o = torch.rand(n, 3, generator=g) * 2.2 - 1.1
+    far = torch.arange(n) % 3 == 0
+    o[far] = nn.functional.normalize(torch.randn(int(far.sum()), 3, generator=g), dim=1) * 2.5
+    d = nn.functional.normalize(torch.randn(n, 3, generator=g), dim=1)
+    d[far] = nn.functional.normalize(torch.rand(int(far.sum()), 3, generator=g) * 1.8 - 0.9 - o[far], dim=1)
+    return o.to(DEVICE), d.to(DEVICE)
+
+
+def responsive(rep: DDF, o: torch.Tensor, d: torch.Tensor) -> DDF:
+    """rep with every body weight x2.5 (a random ReLU stack otherwise answers nearly the same for every input:
+    for 256 x 6 the logits spread by ~0.002) and its output biases shifted so that the rays o + t d get
+    distances around half their chord inside the box and about half of them count as visible."""
     from ddfbench.geometry import box_entry
 
     t_entry, t_exit, meets = box_entry(o, d, rep.domain)
     with torch.no_grad():
+        for m in rep.net.body:
+            if isinstance(m, nn.Linear):
+                m.weight.mul_(2.5)
         dist, logit = rep.net(o[meets] + t_entry[meets, None] * d[meets], d[meets])
         rep.net.out.bias[0] -= (dist - (t_exit - t_entry)[meets] / 2).median()
         if logit is not None:
             rep.net.out.bias[1] -= logit.median()
+    return rep
 
 
 def run_interpreted(test: str) -> None:
@@ -133,26 +150,28 @@ def test_fused_depth_answers_like_the_bf16_depth():
 @pytest.mark.parametrize("shape", NETWORKS, ids=IDS)
 def test_one_kernel_depth_answers_like_the_fused_mlp_between_torch_passes(shape):
     """FusedDepth (box entry, encoding, MLP and hit rule in one kernel) against DDFDepth(fused="mlp") (the
-    same MLP kernel, the rest in torch) and the fp32 answer, on rays from inside and outside the box."""
+    same MLP kernel, the rest in torch) and the fp32 answer, on rays from inside and outside the box that
+    meet it, 10-90 % of them hits."""
     if not needs_a_kernel_runner(f"test_one_kernel_depth_answers_like_the_fused_mlp_between_torch_passes[{IDS[NETWORKS.index(shape)]}]"):
         return
     from ddfbench.ddf_infer import DDFDepth
 
-    rep = random_rep(*shape)
-    o, d = rays(1500, seed=3)
-    o = o * 1.5  # a third of the origins outside the box: some rays miss it or have it behind them
-    balance_hits(rep, o, d)
+    o, d = box_rays(1500, seed=3)
+    rep = responsive(random_rep(*shape), o, d)
     t_one = DDFDepth(rep, "bf16", fused="depth", chunk=1000)(o, d)  # two chunks, the second masked
     t_mlp = DDFDepth(rep, "bf16", fused="mlp", chunk=1000)(o, d)
     t_ref = DDFDepth(rep, "fp32", chunk=1000)(o, d)
     hit, mlp_hit, ref_hit = torch.isfinite(t_one), torch.isfinite(t_mlp), torch.isfinite(t_ref)
     assert t_one.shape == (1500,) and not t_one.isnan().any()
-    assert 0.05 < ref_hit.float().mean() < 0.95
-    # the same arithmetic but for the order of fp32 operations before the bf16 rounding of the inputs
+    assert 0.1 < ref_hit.float().mean() < 0.9
+    both, both_ref, mlp_ref = hit & mlp_hit, hit & ref_hit, mlp_hit & ref_hit
+    # the same arithmetic but for the order of fp32 operations before the bf16 rounding of the inputs (and the
+    # x2.5 weights amplify a flipped bf16 step): a few flipped hits, depths within a bf16 step or so
     assert (hit == mlp_hit).float().mean() > 0.99
-    assert (t_one[hit & mlp_hit] - t_mlp[hit & mlp_hit]).abs().mean() < 2e-3
-    assert (hit == ref_hit).float().mean() > 0.97
-    assert (t_one[hit & ref_hit] - t_ref[hit & ref_hit]).abs().mean() < 0.02
+    assert (t_one[both] - t_mlp[both]).abs().mean() < 5e-3
+    # and no further from the fp32 answer than the MLP kernel's path is
+    assert (hit == ref_hit).float().mean() >= (mlp_hit == ref_hit).float().mean() - 0.005
+    assert (t_one[both_ref] - t_ref[both_ref]).abs().mean() < 1.5 * (t_mlp[mlp_ref] - t_ref[mlp_ref]).abs().mean() + 1e-3
 
 
 @pytest.mark.gpu
@@ -178,8 +197,11 @@ def test_one_kernel_depth_keeps_the_box_and_hit_rule(param):
     o, d = rays(600, seed=4)
     o = o * 1.4
     h = rep.domain
-    o[:6] = torch.tensor([[h, 0.0, 0.0], [-h, 0.3, 0.2], [0.0, h, -h], [0.2, 0.1, 2.0], [0.5, -0.5, 0.0], [2.0, 2.0, 2.0]])
-    d[:6] = torch.tensor([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, 0.0, -1.0], [0.0, 0.0, 1.0], [0.0, 0.0, 1.0]])
+    nan = float("nan")  # a NaN anywhere in a ray: a miss, as in torch (the last two rays)
+    o[:8] = torch.tensor([[h, 0.0, 0.0], [-h, 0.3, 0.2], [0.0, h, -h], [0.2, 0.1, 2.0], [0.5, -0.5, 0.0], [2.0, 2.0, 2.0],
+                          [nan, 0.0, 0.0], [0.1, 0.1, -2.0]])
+    d[:8] = torch.tensor([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, 0.0, -1.0], [0.0, 0.0, 1.0], [0.0, 0.0, 1.0],
+                          [0.0, 0.0, 1.0], [nan, 0.0, 1.0]])
     t = FusedDepth(rep)(o, d).cpu().double().numpy()
     o64, d64 = o.cpu().double().numpy(), d.cpu().double().numpy()
     t_entry, t_exit, meets = box_entry(o64, d64, float(np.float32(h)))  # the box as fp32 sees it: faces included
@@ -189,6 +211,7 @@ def test_one_kernel_depth_keeps_the_box_and_hit_rule(param):
     want = t_entry + dist
     want = np.where(meets & (want > float(rep.cfg["min_hit_distance"])) & (want <= t_exit), want, np.inf)
     # bf16 output head: c and 5 are exact; s0 enters in fp32
+    assert np.isinf(want[6:8]).all() and not np.isnan(t).any()
     assert np.array_equal(np.isinf(t), np.isinf(want)), np.flatnonzero(np.isinf(t) != np.isinf(want))[:10]
     assert 0.05 < np.isfinite(want).mean() < 0.95
     fin = np.isfinite(want)
@@ -233,4 +256,5 @@ def test_fused_parts_times_every_part_and_counts_the_kernel_flops(tmp_path):
     for part in ("encode", "kernel", "finish", "whole", "depth_kernel", "bare_bf16", "gemm_bf16"):
         assert doc[part]["median_s"] > 0 and doc[part]["rays_per_s"] > 0, part
     assert doc["kernel"]["tflops"] > 0 and doc["gemm_bf16"]["tflops"] > 0 and doc["depth_kernel"]["tflops"] > 0
-    assert set(doc["configs"]) == {"mlp", "depth"} and all("BLOCK" in c for c in doc["configs"].values())
+    assert set(doc["configs"]) == {"mlp", "depth"}
+    assert all(("BLOCK" in c and "warps" in c) if CUDA else c.startswith("interpreted") for c in doc["configs"].values())
