@@ -275,18 +275,14 @@ def encoding_columns(net: DDFNet, k0: int) -> tuple[list[int], list[float], list
     """The kernel's tables (k0 entries each) that rebuild DDFNet.features from the ray's channels (see
     _depth_kernel): channel, scale, phase and kind (IDENTITY, SINE, PAD) of every encoding column, in
     features' order (FourierFeatures: the channels, then every channel's sines, then its cosines)."""
-    chan, scale, phase, kind = [], [], [], []
+    columns = []  # (channel, scale, phase, kind)
     n_pos = 4 if net.param == "ray" else 3
     for pe, channels in ((net.pos_pe, range(n_pos)), (net.dir_pe, range(n_pos, n_pos + 3))):
-        freqs = pe.freqs.tolist()
-        for c in channels:
-            chan, scale, phase, kind = chan + [c], scale + [1.0], phase + [0.0], kind + [IDENTITY]
-        for shift in (0.0, math.pi / 2):
-            for c in channels:
-                for f in freqs:
-                    chan, scale, phase, kind = chan + [c], scale + [f], phase + [shift], kind + [SINE]
-    pad = k0 - len(chan)
-    return chan + [0] * pad, scale + [0.0] * pad, phase + [0.0] * pad, kind + [PAD] * pad
+        columns += [(c, 1.0, 0.0, IDENTITY) for c in channels]
+        columns += [(c, f, shift, SINE) for shift in (0.0, math.pi / 2) for c in channels for f in pe.freqs.tolist()]
+    columns += [(0, 0.0, 0.0, PAD)] * (k0 - len(columns))
+    chan, scale, phase, kind = (list(v) for v in zip(*columns))
+    return chan, scale, phase, kind
 
 
 def supported_depth(net: DDFNet) -> str | None:
@@ -330,8 +326,7 @@ class FusedDepth:
 
 def config(kernel_name: str) -> str:
     """The block size and warps the autotuner chose last for kernel "mlp" or "depth" (or why there is none)."""
-    kernel = {"mlp": _MLP, "depth": _DEPTH}[kernel_name]
-    best = getattr(kernel, "best_config", None)
     if INTERPRETED:
         return "interpreted: BLOCK 128"
+    best = getattr({"mlp": _MLP, "depth": _DEPTH}[kernel_name], "best_config", None)
     return f"BLOCK {best.kwargs['BLOCK']}, {best.num_warps} warps" if best is not None else "not tuned yet"

@@ -105,9 +105,7 @@ def ddf_variants(ctx: Context, rep: DDF, compile_too: bool, details: dict | None
     if compiling:
         out["ddf_bf16_compiled"] = DDFDepth(rep, "bf16", compiled=True, chunk=chunk)
     if ctx.device.startswith("cuda") and importlib.util.find_spec("triton") is not None:
-        for name, fused in (("ddf_bf16_fused", "mlp"), ("ddf_bf16_fused_depth", "depth")):
-            if fused == "mlp" and not compiling:
-                continue
+        for name, fused in [("ddf_bf16_fused", "mlp")] * bool(compiling) + [("ddf_bf16_fused_depth", "depth")]:
             try:
                 variant = DDFDepth(rep, "bf16", compiled=fused == "mlp", chunk=chunk, fused=fused)
                 _check_against(variant, out["ddf_bf16"], ctx.device)
