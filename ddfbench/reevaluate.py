@@ -66,6 +66,26 @@ def _image_metrics(rec: dict[str, Any], gt: trimesh.Trimesh, scene: dict[str, An
         return render_scene(rep, mesh_reference(gt, domain, backend=backend), once, tmp, seed).get("metrics", {})
 
 
+def records_parser(tool: str, description: str, out_files: str, n_points: int) -> argparse.ArgumentParser:
+    """The arguments every tool that measures an experiment's finished records takes again: the records
+    folder, --out, --n-points (surface points per mesh), --model and --threads."""
+    ap = argparse.ArgumentParser(prog=f"python -m ddfbench.{tool}", description=description)
+    ap.add_argument("results", help="an experiment's records folder (results/<experiment>)")
+    ap.add_argument("--out", required=True, help=f"folder for {out_files}")
+    ap.add_argument("--n-points", type=int, default=n_points, help=f"surface points per mesh (default {n_points})")
+    ap.add_argument("--model", nargs="*", default=None, help="only these models (the records' `model` labels)")
+    ap.add_argument("--threads", type=int, default=0, help="torch threads (0: torch's default)")
+    return ap
+
+
+def checked_counts(args: argparse.Namespace) -> None:
+    """InputError unless --n-points >= 1 and --threads >= 0; sets torch's threads when --threads is given."""
+    if args.n_points < 1 or args.threads < 0:
+        raise InputError(f"--n-points {args.n_points} / --threads {args.threads}: need n-points >= 1, threads >= 0")
+    if args.threads:
+        torch.set_num_threads(args.threads)
+
+
 def finished_records(results: str, models: list[str] | None) -> list[dict[str, Any]]:
     """The ok records below `results` (of `models` only, when given); InputError when there are none."""
     recs = [r for r in find_records(results) if r.get("status") == "ok" and (not models or r.get("model") in models)]
@@ -99,26 +119,19 @@ def reevaluated(rec: dict[str, Any], n_points: int, scene: dict[str, Any] | str 
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m ddfbench.reevaluate", description="A finished sweep measured again from its saved artifacts.")
-    ap.add_argument("results", help="an experiment's records folder (results/<experiment>)")
-    ap.add_argument("--out", required=True, help="folder for table.md, table.csv and runs.csv")
-    ap.add_argument("--n-points", type=int, default=100_000, help="surface points per mesh (default 100000)")
+    ap = records_parser("reevaluate", "A finished sweep measured again from its saved artifacts.",
+                        "table.md, table.csv and runs.csv", 100_000)
     ap.add_argument("--scene", default=None, help="also render each saved model with conf/scene/<NAME>.yaml "
                     f"('{RECORD_SCENE}': the run's own scene)")
-    ap.add_argument("--model", nargs="*", default=None, help="only these models (the records' `model` labels)")
-    ap.add_argument("--threads", type=int, default=0, help="torch threads (0: torch's default)")
     args = ap.parse_args(argv)
     try:
-        if args.n_points < 1 or args.threads < 0:
-            raise InputError(f"--n-points {args.n_points} / --threads {args.threads}: need n-points >= 1, threads >= 0")
+        checked_counts(args)
         scene = (plugins.plugin_yaml("scene", args.scene) if args.scene and args.scene != RECORD_SCENE
                  else args.scene)
         recs = finished_records(args.results, args.model)
     except InputError as err:
         print(f"ddfbench.reevaluate: {err}", file=sys.stderr)
         return 2
-    if args.threads:
-        torch.set_num_threads(args.threads)
     done, failed = [], 0
     for i, rec in enumerate(sorted(recs, key=lambda r: (r["model"], r["shape"]["name"], r["key"]))):
         try:

@@ -27,7 +27,6 @@ are still written (exit 1).
 
 from __future__ import annotations
 
-import argparse
 import math
 import os
 import sys
@@ -43,7 +42,7 @@ from ddfbench.geometry import BOX_HALF
 from ddfbench.metrics import geometry_metrics, sample_surface
 from ddfbench.models import load_family
 from ddfbench.models._sdf_family import SDFFamily
-from ddfbench.reevaluate import artifact, finished_records, measured_header
+from ddfbench.reevaluate import artifact, checked_counts, finished_records, measured_header, records_parser
 
 PERCENTILES = (5, 25, 50, 75, 95)
 GRAD_BATCH = 1024  # points per backward pass (the GAN generator's graph is ~35k floats a point)
@@ -131,17 +130,11 @@ def _table_order(rec: dict[str, Any]) -> tuple:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m ddfbench.zero_level",
-                                 description="Where finished SDF runs' zero levels lie against the true surface.")
-    ap.add_argument("results", help="an experiment's records folder (results/<experiment>)")
-    ap.add_argument("--out", required=True, help="folder for table.md and table.csv")
-    ap.add_argument("--n-points", type=int, default=20_000, help="points sampled on each GT surface (default 20000)")
-    ap.add_argument("--model", nargs="*", default=None, help="only these models (the records' `model` labels)")
-    ap.add_argument("--threads", type=int, default=0, help="torch threads (0: torch's default)")
+    ap = records_parser("zero_level", "Where finished SDF runs' zero levels lie against the true surface.",
+                        "table.md and table.csv", 20_000)
     args = ap.parse_args(argv)
     try:
-        if args.n_points < 1 or args.threads < 0:
-            raise InputError(f"--n-points {args.n_points} / --threads {args.threads}: need n-points >= 1, threads >= 0")
+        checked_counts(args)
         recs = finished_records(args.results, args.model)
         sdf_recs = [r for r in recs if issubclass(load_family(str(r["family"])), SDFFamily)]
         if not sdf_recs:
@@ -149,8 +142,6 @@ def main(argv: list[str] | None = None) -> int:
     except InputError as err:
         print(f"ddfbench.zero_level: {err}", file=sys.stderr)
         return 2
-    if args.threads:
-        torch.set_num_threads(args.threads)
     rows, failed = [], 0
     for rec in sorted(sdf_recs, key=_table_order):
         try:

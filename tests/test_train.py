@@ -10,7 +10,6 @@ from ddfbench.representation import Budget
 from ddfbench.train import Schedule, probe_fractions, resolve_device, seed_everything, train_loop
 
 
-
 def regression(seed=0):
     """A small linear regression problem and its step function."""
     seed_everything(seed)
@@ -23,6 +22,16 @@ def regression(seed=0):
         return ((model(x) - x @ w_true.T) ** 2).mean()
 
     return model, step_fn, w_true
+
+
+def slowed(step_fn, seconds):
+    """step_fn that first sleeps `seconds`: a step whose wall-clock cost is known."""
+
+    def slow(step):
+        time.sleep(seconds)
+        return step_fn(step)
+
+    return slow
 
 
 def test_loss_decreases_and_step_budget_is_respected():
@@ -39,13 +48,8 @@ def test_loss_decreases_and_step_budget_is_respected():
 
 def test_wall_clock_budget_stops_training():
     model, step_fn, _ = regression()
-
-    def slow(step):
-        time.sleep(0.01)
-        return step_fn(step)
-
     opt = torch.optim.SGD(model.parameters(), lr=0.01)
-    stats = train_loop(model, opt, slow, Budget(max_steps=10**6, max_seconds=0.2, n_probes=0), quiet=True)
+    stats = train_loop(model, opt, slowed(step_fn, 0.01), Budget(max_steps=10**6, max_seconds=0.2, n_probes=0), quiet=True)
     assert stats.extra["stop"] == "max_seconds" and stats.status == "ok"
     assert 1 <= stats.steps < 10**6 and stats.seconds >= 0.2
 
@@ -79,14 +83,9 @@ def test_probes_are_log_spaced_in_eval_mode_and_not_charged_to_training():
 
 def test_probe_time_does_not_eat_the_wall_clock_budget():
     model, step_fn, _ = regression()
-
-    def slow(step):
-        time.sleep(0.005)
-        return step_fn(step)
-
     opt = torch.optim.SGD(model.parameters(), lr=0.01)
     probe = lambda: time.sleep(0.3) or {}  # noqa: E731
-    stats = train_loop(model, opt, slow, Budget(max_steps=10**6, max_seconds=0.3, n_probes=3), probe_fn=probe,
+    stats = train_loop(model, opt, slowed(step_fn, 0.005), Budget(max_steps=10**6, max_seconds=0.3, n_probes=3), probe_fn=probe,
                        quiet=True)
     assert len(stats.probes) == 3 and stats.extra["stop"] == "max_seconds"
 
