@@ -85,9 +85,8 @@ class DDFDepth:
         """t (N,) where the ray hits, else inf: distance dist (N,) from the box entry t_entry (N,)."""
         dist = dist.float().clamp_min(0.0)
         visible = self.rep._hit_from(dist, None if logit is None else logit.float())
-        t = t_entry + dist
-        hit = visible & meets & (t > float(self.rep.cfg["min_hit_distance"])) & (t <= t_exit)
-        return torch.where(hit, t, torch.inf)
+        hit = visible & meets & self.rep._accept(t_entry, t_exit, dist)
+        return torch.where(hit, t_entry + dist, torch.inf)
 
     @torch.no_grad()
     def __call__(self, origins: torch.Tensor, directions: torch.Tensor) -> torch.Tensor:

@@ -228,11 +228,7 @@ def _crossing_ends(values: np.ndarray, level: float) -> np.ndarray:
 def sdf_to_mesh(fn: Field, resolution: int, domain: float, batch: int = 65536, coarse: int = 1,
                 lipschitz: float = 1.0, carry: bool = False):
     """Signed field (negative inside) -> marching cubes at level 0 -> (mesh, info). See banded_grid."""
-    t0 = time.perf_counter()
-    values, evals, capped = banded_grid(fn, resolution, domain, 0.0, coarse, lipschitz, batch, carry)
-    mesh, info = field_to_mesh(values, domain, 0.0)
-    info.update(field_evals=evals, capped=capped, seconds=time.perf_counter() - t0)
-    return mesh, info
+    return _level_mesh(fn, resolution, domain, 0.0, batch, coarse, lipschitz, carry)
 
 
 def udf_to_mesh(fn: Field, resolution: int, domain: float, level: float, batch: int = 65536, coarse: int = 1,
@@ -240,8 +236,14 @@ def udf_to_mesh(fn: Field, resolution: int, domain: float, level: float, batch: 
     """Unsigned field -> marching cubes at a small positive `level` (a shell around the surface)."""
     if not level > 0:
         raise InputError(f"udf level {level}: must be > 0 (an unsigned field never crosses 0)")
+    return _level_mesh(fn, resolution, domain, float(level), batch, coarse, lipschitz, carry=False)
+
+
+def _level_mesh(fn: Field, resolution: int, domain: float, level: float, batch: int, coarse: int, lipschitz: float,
+                carry: bool):
+    """banded_grid then marching cubes at `level` -> (mesh, info with field_evals, capped and seconds)."""
     t0 = time.perf_counter()
-    values, evals, capped = banded_grid(fn, resolution, domain, float(level), coarse, lipschitz, batch)
-    mesh, info = field_to_mesh(values, domain, float(level))
+    values, evals, capped = banded_grid(fn, resolution, domain, level, coarse, lipschitz, batch, carry)
+    mesh, info = field_to_mesh(values, domain, level)
     info.update(field_evals=evals, capped=capped, seconds=time.perf_counter() - t0)
     return mesh, info

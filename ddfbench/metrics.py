@@ -53,7 +53,7 @@ def f_score_of(d_pred_gt: np.ndarray, d_gt_pred: np.ndarray, radius: float) -> f
 
 
 def summary(values: np.ndarray) -> dict[str, float]:
-    """mean, median and 95th percentile of a 1-D array."""
+    """mean, median and 95th percentile of values (N,), in their own units."""
     return {"mean": float(values.mean()), "median": float(np.median(values)), "p95": float(np.percentile(values, 95))}
 
 

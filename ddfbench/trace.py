@@ -285,7 +285,8 @@ def to_hits(result: TraceResult, directions: np.ndarray, normals: np.ndarray | N
     """Hits from a trace and (optionally) normals of the hit rays (H, 3), turned to face the ray (n·d < 0).
 
     stats: field_evals (trace + normal evaluations), trace_steps, backward_passes (points differentiated),
-    undecided (rays that hit the step cap or grazed their start surface).
+    undecided (rays that hit the step cap or grazed their start surface), host_syncs (the trace's
+    device-to-host round trips, TraceResult.host_syncs).
     """
     n = len(result.t)
     out = Hits.empty(n)
@@ -302,5 +303,6 @@ def to_hits(result: TraceResult, directions: np.ndarray, normals: np.ndarray | N
         "trace_steps": result.trace_steps,
         "backward_passes": int(backward_passes),
         "undecided": int((result.status == RayStatus.UNDECIDED).sum()),
+        "host_syncs": int(result.host_syncs),
     }
     return out

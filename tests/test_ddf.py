@@ -85,6 +85,27 @@ def test_fit_reaches_small_error_on_a_sphere(fitted):
     assert np.isinf(hits.t[~hits.hit]).all()
 
 
+def test_distance_and_visibility_answer_rays_from_any_point(fitted):
+    """phi(x, d) and the visibility output, asked at points inside the box (no box entry): the sphere's
+    hit distance and mask; at box-entry points they are what intersect adds to t_entry."""
+    rep, _ = fitted
+    rng = np.random.default_rng(8)
+    x = rng.uniform(-0.55, 0.55, (6000, 3)).astype(np.float32)
+    x = x[np.linalg.norm(x, axis=1) > R0 + 0.02]
+    d = unit(rng.normal(size=(len(x), 3))).astype(np.float32)
+    truth, vis, dist = analytic_hit(x, d), rep.visibility(x, d), rep.distance(x, d)
+    assert vis.dtype == bool and dist.dtype == np.float32 and (dist >= 0).all()
+    assert (vis == np.isfinite(truth)).mean() > 0.95
+    both = vis & np.isfinite(truth)
+    assert np.median(np.abs(dist[both] - truth[both])) < 0.01
+    o, dc = camera_rays(3000, 9)
+    t_entry = box_entry(o, dc, 0.6)[0]
+    hits = rep.intersect(o, dc, normals=False)
+    at_entry = (o + t_entry[:, None] * dc).astype(np.float32)
+    np.testing.assert_allclose(hits.t[hits.hit], (t_entry + rep.distance(at_entry, dc))[hits.hit], rtol=1e-6)
+    assert rep.visibility(at_entry, dc)[hits.hit].all()
+
+
 def analytic_line_distance(x, d):
     """Signed distance from x along d to the first crossing of the sphere by the line, seen from its box entry."""
     back = box_entry(x, -d, 0.6)[1]

@@ -119,6 +119,11 @@ def test_only_active_rays_are_evaluated():
         alone += one.field_evals
         assert one.hit[0] == res.hit[i]
     assert res.field_evals == sum(together.batches) == alone
+    # the host waits for the device a bounded number of times per loop step, whatever the ray count:
+    # one compaction and one bracket check a step (one more on a step with crossings), two at the start
+    steps = len(together.batches)
+    assert 2 + 2 * steps <= res.host_syncs <= 2 + 3 * steps
+    assert to_hits(res, d).stats["host_syncs"] == res.host_syncs
     assert res.field_evals < 0.5 * len(together.batches) * len(o)
     assert together.batches == sorted(together.batches, reverse=True)  # the active set only shrinks
 

@@ -22,7 +22,8 @@ from ddfbench.bench.timing import once
 
 
 def errors(grid_values: np.ndarray, exact: np.ndarray, h: float) -> dict:
-    """Largest |grid - exact| in the band (<= 2h), the shell (<= 8h) and overall; sign disagreements."""
+    """Largest |grid - exact| in the band (<= 2h), the shell (<= 8h) and overall; sign disagreements.
+    grid_values and exact: SDF values at the same nodes (any shape, unit-cube units); h: the grid spacing."""
     err = np.abs(grid_values - exact)
     out = {"nodes_compared": int(exact.size), "max_err_all": float(err.max()), "mean_err_all": float(err.mean()),
            "sign_flips": int((np.sign(grid_values) != np.sign(exact)).sum())}

@@ -93,6 +93,7 @@ def run(ctx: Context) -> SectionResult:
             result.details[f"{name}_{prec}"] = {
                 **info, "rays": n, "tracer": tracer_t.as_dict(), "naive": naive_t.as_dict(),
                 "tracer_evals": traced.field_evals, "naive_evals": naive_evals,
+                "tracer_host_syncs": traced.host_syncs,
                 "tracer_hit_share": float(traced.hit.mean()), "undecided": int((traced.status == 2).sum()),
                 "mask_agreement_tracer_vs_oracle": float((traced.hit == gt_hit).mean()),
                 "mask_agreement_naive_vs_oracle": float((naive_hit == gt_hit).mean()),

@@ -104,7 +104,8 @@ def adversarial_losses(kind: str) -> tuple:
 
 
 def near_surface_term(pred: torch.Tensor, target: torch.Tensor, reading: str) -> torch.Tensor:
-    """The thesis' near-surface term under one of its two readings (see module docstring)."""
+    """The thesis' near-surface term under one of its two readings (see module docstring): pred and target
+    (B,) SDF values in the scaled target units (target_scale), a scalar out."""
     if reading == "exp":
         return (torch.exp(-pred**2 / 0.1) - torch.exp(-target**2 / 0.1)).pow(2).mean()
     if reading == "literal":

@@ -37,7 +37,7 @@ def decimate(mesh: trimesh.Trimesh, faces: int) -> trimesh.Trimesh:
     return trimesh.Trimesh(out.vertex_matrix(), out.face_matrix(), process=False)
 
 
-T_MIN = 1e-5  # unit-cube units (float32 Embree: ~3e-8 at 0.5; renderer offsets are 1e-3): a hit nearer than this is the surface the ray starts on
+T_MIN = 1e-5  # unit-cube units (float32 ray casters: ~3e-8 at 0.5; renderer offsets are 1e-3): a hit nearer than this is the surface the ray starts on
 
 
 class MeshFamily(Representation):
@@ -71,7 +71,8 @@ class MeshFamily(Representation):
         return self
 
     def intersect(self, origins: np.ndarray, directions: np.ndarray, normals: bool = True) -> Hits:
-        """Embree first hit, never the surface a ray starts on: a hit closer than T_MIN is cast again
+        """First hit from the oracle's ray caster (cfg.backend: open3d, embree or warp), never the surface a ray
+        starts on: a hit closer than T_MIN is cast again
         from T_MIN further along (up to 3 times, doubling T_MIN, for starts that graze a facet)."""
         origins = np.asarray(origins, np.float64).reshape(-1, 3)
         directions = np.asarray(directions, np.float64).reshape(-1, 3)

@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ddfbench.geometry import camera_basis, pinhole_rays, unit
+from ddfbench.geometry import pinhole_rays, unit
 
 
 @dataclass(frozen=True, eq=False)
@@ -25,10 +25,6 @@ class Camera:
     width: int
     height: int
     up: np.ndarray = field(default_factory=lambda: np.array([0.0, 1.0, 0.0]))
-
-    def basis(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Unit forward, right and up vectors (right-handed: right = forward × up)."""
-        return camera_basis(self.position, self.look_at, self.up)
 
     def rays(self, jitter: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Rays of every pixel, S samples each (geometry.pinhole_rays in float32).

@@ -32,8 +32,8 @@ from typing import Any, Callable
 from ddfbench.errors import InputError
 from ddfbench.metric_registry import by_name
 from ddfbench.report import matched, paired
-from ddfbench.report.records import chamfer_l2, empty_mesh, no_result, ok_records, shape_name
-from ddfbench.report.stats import INTERVAL_NAME, Summary, summarize_values
+from ddfbench.report.records import SURFACE_FACTORS, chamfer_l2, empty_mesh, no_result, ok_records, shape_name
+from ddfbench.report.stats import INTERVAL_NAME, Summary, sig3, summarize_values
 from ddfbench.runs import code_commits, find_records
 
 CONFIRMED, REFUTED, NOT_SEPARABLE, NOT_TESTABLE, NO_RECORDS, NOT_CONVERGED = (
@@ -66,13 +66,9 @@ def _n_points(records: list[dict[str, Any]]) -> str:
     return "/".join(str(n) for n in ns) or "?"
 
 
-def _sci(x: float, scale: float = 1e3) -> str:
-    return f"{x * scale:.3g}" if math.isfinite(x) else "–"
-
-
 def _interval(s: Summary, scale: float = 1e3) -> str:
-    return f"{_sci(s.mean, scale)} ± {_sci(s.hi - s.mean, scale)} (n={s.n})" if s.n > 1 else \
-        f"{_sci(s.mean, scale)} (n={s.n}, no interval)"
+    return f"{sig3(s.mean, scale)} ± {sig3(s.hi - s.mean, scale)} (n={s.n})" if s.n > 1 else \
+        f"{sig3(s.mean, scale)} (n={s.n}, no interval)"
 
 
 def _ratio(s: Summary) -> str:
@@ -102,7 +98,7 @@ def table2_ordering(records: Records) -> list[Claim]:
     if not ok_records(recs):
         return [_missing("s_p matters most", src, paper, "ablation")]
     at30 = {f: paired.values(recs, "chamfer_l2", lambda r, f=f: paired.surface_levels(r) == _level30(f),
-                             paired.seed_key) for f in ("s_fc", "s_dr", "s_p")}
+                             paired.seed_key) for f in SURFACE_FACTORS}
     conv = ("Ours: bone, DDF default preset, per-face sampling, fixed epochs; " + KAOLIN_NOTE.format(n=_n_points(recs))
             + " The paper's text ranks s_fc above s_dr, its own table moves s_dr more.")
     rows = "`ablation`: s_x=30 rows against each other, paired by seed"
@@ -117,7 +113,7 @@ def table2_ordering(records: Records) -> list[Claim]:
 
 
 def _level30(factor: str) -> str:
-    return " ".join(f"{k}={30 if k == factor else 10}" for k in ("s_fc", "s_dr", "s_p"))
+    return " ".join(f"{k}={30 if k == factor else 10}" for k in SURFACE_FACTORS)
 
 
 def fig6_ordering(records: Records) -> list[Claim]:

@@ -16,6 +16,7 @@ import numpy as np
 
 from ddfbench.metric_registry import by_name
 from ddfbench.report.records import OFF_SHAPE_RULE, Record, empty_mesh, off_shape, ok_records, shape_name
+from ddfbench.report.stats import sig3
 
 FLOOR_MULTIPLES = (5.0, 2.0)  # time-to-reach k x the chamfer noise floor
 NOT_REACHED = "not reached"
@@ -53,7 +54,8 @@ def band(runs: list[tuple[np.ndarray, np.ndarray]]) -> tuple[np.ndarray, np.ndar
 
 
 def time_to_reach(t: np.ndarray, v: np.ndarray, threshold: float, better: str = "low") -> float:
-    """Seconds of training at the first probe at or past `threshold` (inf if none)."""
+    """Seconds of training at the first probe at or past `threshold` (inf if none): t (P,) fit seconds and
+    v (P,) the metric at each of a run's P probes, in step order; better "low" (chamfer) or "high" (F-score)."""
     hit = v <= threshold if better == "low" else v >= threshold
     return float(t[np.argmax(hit)]) if hit.any() else math.inf
 
@@ -122,7 +124,7 @@ def probe_markdown(rows: list[dict[str, Any]]) -> str:
     """The probe table: chamfer L2 x10^3 and F@0.01 at each probe of each run."""
     lines = ["| model | shape | seed | step | epoch | fit s | CD-L2 ×10³ | F@0.01 |", "|---" * 8 + "|"]
     for r in rows:
-        f, epoch = r.get("fscore@0.01", math.nan), f"{r['epoch']:.3g}" if math.isfinite(r["epoch"]) else "–"
+        f, epoch = r.get("fscore@0.01", math.nan), sig3(r["epoch"])
         lines.append(f"| {r['model']} | {r['shape']} | {r['seed']} | {r['step']:,} | {epoch} "
                      f"| {r['seconds']:.4g} | {r['chamfer_l2'] * 1e3:.4g} | {f:.3g} |")
     lines += ["", "Each run's accuracy probes as its record holds them (fit.probes): the probe mesh's resolution "
@@ -168,7 +170,7 @@ def stability_markdown(rows: list[dict[str, Any]]) -> str:
     lines = ["| model | shape | runs | diverged | stopped non-finite | empty mesh | off the shape | regressed "
              "| worst last/best probe | failed otherwise |", "|---" * 10 + "|"]
     for r in rows:
-        ratio = f"{r['worst_ratio']:.3g}" if math.isfinite(r["worst_ratio"]) else "–"
+        ratio = sig3(r["worst_ratio"])
         lines.append(f"| {r['model']} | {r['shape']} | {r['runs']} | {r['diverged']} of {r['runs']} | {r['nonfinite']} "
                      f"| {r['empty']} | {r['off']} | {r['regressed']} | {ratio} | {r['failed_other']} |")
     lines += ["", f"A run diverged when its fit stopped on a non-finite loss or weight, its final mesh is empty or "

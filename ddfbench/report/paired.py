@@ -14,8 +14,8 @@ from typing import Any, Callable, Iterable
 import numpy as np
 
 from ddfbench.metric_registry import by_name
-from ddfbench.report.records import Record, ok_records
-from ddfbench.report.stats import Summary, summarize_values
+from ddfbench.report.records import SURFACE_FACTORS, Record, ok_records
+from ddfbench.report.stats import Summary, sig3, summarize_values
 
 
 def values(records: Iterable[Record], metric: str, select: Callable[[Record], bool],
@@ -55,10 +55,6 @@ def compare_settings(records: list[Record], metric: str, setting: Callable[[Reco
     return rows
 
 
-def _fmt(x: float, scale: float) -> str:
-    return f"{x * scale:.3g}" if math.isfinite(x) else "–"
-
-
 def to_markdown(rows: list[dict[str, Any]], metric: str, baseline: str, what: str) -> str:
     """A table of paired differences and ratios against the baseline, with t intervals."""
     m = by_name()[metric]
@@ -69,16 +65,16 @@ def to_markdown(rows: list[dict[str, Any]], metric: str, baseline: str, what: st
     for row in rows:
         d, r = row["diff"], row["ratio"]
         sep = "yes" if math.isfinite(d.lo) and (d.lo > 0 or d.hi < 0) else "no"
-        lines.append(f"| {row['setting']} | {d.n} | {_fmt(d.mean, m.scale)} | [{_fmt(d.lo, m.scale)}, "
-                     f"{_fmt(d.hi, m.scale)}] | {_fmt(np.exp(r.mean), 1)} | [{_fmt(np.exp(r.lo), 1)}, "
-                     f"{_fmt(np.exp(r.hi), 1)}] | {sep} |")
+        lines.append(f"| {row['setting']} | {d.n} | {sig3(d.mean, m.scale)} | [{sig3(d.lo, m.scale)}, "
+                     f"{sig3(d.hi, m.scale)}] | {sig3(np.exp(r.mean), 1)} | [{sig3(np.exp(r.lo), 1)}, "
+                     f"{sig3(np.exp(r.hi), 1)}] | {sep} |")
     return "\n".join(lines) + "\n"
 
 
 def surface_levels(rec: Record) -> str:
     """The ablation's setting: "s_fc=.. s_dr=.. s_p=.." of a record's sampling."""
     s = rec.get("sampling") or {}
-    return " ".join(f"{k}={s.get(k)}" for k in ("s_fc", "s_dr", "s_p"))
+    return " ".join(f"{k}={s.get(k)}" for k in SURFACE_FACTORS)
 
 
 def strategy(rec: Record) -> str:

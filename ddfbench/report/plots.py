@@ -33,7 +33,9 @@ import numpy as np  # noqa: E402
 
 from ddfbench.metric_registry import by_name as registry_metrics  # noqa: E402
 from ddfbench.report import convergence  # noqa: E402
-from ddfbench.report.records import as_float, chamfer_l2, no_result, ok_records, shape_name  # noqa: E402
+from ddfbench.report.records import (SURFACE_FACTORS, as_float, chamfer_l2, no_result, ok_records,  # noqa: E402
+                                     shape_name)
+from ddfbench.report.stats import summarize_values  # noqa: E402
 from ddfbench.report.tables import override_labels  # noqa: E402
 
 PLOTS_BY_EXPERIMENT: dict[str, tuple[str, ...]] = {
@@ -52,7 +54,6 @@ PLOTS_BY_EXPERIMENT: dict[str, tuple[str, ...]] = {
 }
 DEFAULT_PLOTS = ("fit_curves", "pareto")
 COST_AXES = (("render_warm_s", "warm render time (s)"), ("fit_s", "fit time (s)"), ("storage_bytes", "storage (bytes)"))
-SURFACE_FACTORS = ("s_fc", "s_dr", "s_p")
 PENALTY_CHAMFER_L2 = registry_metrics()["chamfer_l2"].penalty  # what an empty reconstruction scores
 
 
@@ -113,10 +114,9 @@ def _floor_line(ax: Any, floor: float) -> None:
 
 
 def _mean_std(values: list[float]) -> tuple[float, float]:
-    v = np.array([x for x in values if math.isfinite(x)], dtype=float)
-    if not len(v):
-        return math.nan, math.nan
-    return float(v.mean()), float(v.std(ddof=1)) if len(v) > 1 else 0.0
+    """Mean and std of the finite values, for a point and its error bar (std 0 for one value, NaN for none)."""
+    s = summarize_values(values)
+    return s.mean, (s.std if s.n > 1 else 0.0 if s.n == 1 else math.nan)
 
 
 def plot_fit_curves(records: list[dict[str, Any]], out_dir: str) -> list[str]:

@@ -20,6 +20,7 @@ __all__ = ["OFF_SHAPE_RULE", "Record", "WIDEST_F", "as_float", "chamfer_l2", "em
 
 WIDEST_F = f"fscore@{max(FSCORE_RADII)}"  # 0 there: no sampled point of either surface near the other
 OFF_SHAPE_RULE = f"{by_name()[WIDEST_F].label} = 0"  # as the reports write it
+SURFACE_FACTORS = ("s_fc", "s_dr", "s_p")  # the DDF paper's surface-sampling factors, as a sweep's keys
 
 Record = dict[str, Any]
 

@@ -45,6 +45,11 @@ def summarize_values(values: Iterable[float], level: float = LEVEL) -> Summary:
     return Summary(mean, std, n, mean - half, mean + half)
 
 
+def sig3(x: float, scale: float = 1.0) -> str:
+    """x · scale to 3 significant digits, or "–" where x is not finite (a missing value in a table)."""
+    return f"{x * scale:.3g}" if math.isfinite(x) else "–"
+
+
 def overlaps(a: tuple[float, float], b: tuple[float, float]) -> bool:
     """Whether two intervals [lo, hi] share a point; an interval with a NaN bound (n < 2) overlaps all."""
     if not all(math.isfinite(x) for x in (*a, *b)):

@@ -60,7 +60,9 @@ class Collector:
 
     def add(self, x: np.ndarray, d: np.ndarray | None = None, t: np.ndarray | None = None,
             sdf: np.ndarray | None = None, done: float = 1.0) -> None:
-        """Append N samples; `done` (0..1] is the share of the work finished, for the size estimate."""
+        """Append N samples: points x (N, 3), unit directions d (N, 3), hit distances t (N,) (inf: a miss),
+        signed distances sdf (N,), float32 unit-cube units, each kind only if this collector holds it;
+        `done` (0..1] is the share of the work finished, for the size estimate."""
         n_total = self.n + len(x)
         if n_total > self.cap:
             self._too_many(n_total / max(done, 1e-9), RAY_SAMPLE_BYTES if d is not None else SDF_SAMPLE_BYTES)

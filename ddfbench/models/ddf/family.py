@@ -86,6 +86,7 @@ class DDF(Representation):
 
     def _accept(self, t_entry: np.ndarray, t_exit: np.ndarray, dist: np.ndarray) -> np.ndarray:
         """Which predicted hits count (N,) bool: not nearer than min_hit_distance, not beyond the box exit.
+        t_entry, t_exit, dist (N,): numpy arrays or torch tensors (ddf_infer's device path), the same kind out.
 
         A hit predicted closer than min_hit_distance (the renderer's secondary-ray offset; a learned field is
         no more precise than that near its surface) is the surface the ray starts on; camera rays start at
