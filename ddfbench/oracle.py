@@ -47,6 +47,16 @@ def _f32(a: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(a, dtype=np.float32)
 
 
+def open3d_scene(mesh: trimesh.Trimesh, what: str = "an open3d ray-casting scene") -> o3d.t.geometry.RaycastingScene:
+    """open3d's RaycastingScene of the mesh's triangles (float32 vertices), nothing around it; a one-line
+    InputError naming `what` where open3d is not installed."""
+    o3d = _open3d(what)
+    scene = o3d.t.geometry.RaycastingScene()
+    scene.add_triangles(o3d.core.Tensor(_f32(mesh.vertices)),
+                        o3d.core.Tensor(np.ascontiguousarray(mesh.faces, dtype=np.uint32)))
+    return scene
+
+
 def _ray_chunks(origins: np.ndarray, directions: np.ndarray) -> Iterator[tuple[slice, o3d.core.Tensor]]:
     """Rays (N,3),(N,3) packed once in open3d's layout (N, 6) float32 [origin, direction] (casting as it
     copies), then handed out as (rows, zero-copy tensor) of at most _CHUNK rays."""
@@ -88,22 +98,15 @@ class Oracle:
 
             self._embree = RayMeshIntersector(mesh)
         if backend == "open3d":  # every query needs the scene: a missing open3d is one line here, not mid-sampling
-            self._o3d_scene = self._build_scene()
+            self._o3d_scene = open3d_scene(mesh, f"oracle backend '{backend}'")
 
     @property
     def _scene(self):
         """open3d's RaycastingScene of the mesh (open3d backend: built in __init__; embree: on first use of a
         query other than first hits; warp: never)."""
         if self._o3d_scene is None:
-            self._o3d_scene = self._build_scene()
+            self._o3d_scene = open3d_scene(self.mesh, f"oracle backend '{self.backend}'")
         return self._o3d_scene
-
-    def _build_scene(self):
-        o3d = _open3d(f"oracle backend '{self.backend}'")
-        scene = o3d.t.geometry.RaycastingScene()
-        scene.add_triangles(o3d.core.Tensor(_f32(self.mesh.vertices)),
-                            o3d.core.Tensor(np.ascontiguousarray(self.mesh.faces, dtype=np.uint32)))
-        return scene
 
     # ---- rays -------------------------------------------------------------------------------
     def first_hit(self, origins: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

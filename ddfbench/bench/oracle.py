@@ -20,22 +20,15 @@ from ddfbench.bench.context import Context
 from ddfbench.bench.results import SectionResult, compare
 from ddfbench.bench.timing import measure_side_by_side
 from ddfbench.bench.views import incoherent_rays, view_rays
+from ddfbench.oracle import open3d_scene
 
 BACKENDS = ("open3d", "embree") + (("warp",) if importlib.util.find_spec("warp") else ())
-
-
-def bare_scene(mesh) -> o3d.t.geometry.RaycastingScene:
-    """open3d's RaycastingScene of the mesh, nothing around it."""
-    scene = o3d.t.geometry.RaycastingScene()
-    scene.add_triangles(o3d.core.Tensor(np.asarray(mesh.vertices, np.float32)),
-                        o3d.core.Tensor(np.asarray(mesh.faces, np.uint32)))
-    return scene
 
 
 def run(ctx: Context) -> SectionResult:
     s = ctx.sizes
     shape = ctx.shape(s["shape"])
-    scene = bare_scene(shape.mesh)
+    scene = open3d_scene(shape.mesh)
     result = SectionResult(details={"faces": int(len(shape.mesh.faces))})
     for kind, (o, d) in (("primary", view_rays(int(s["primary_px"]))),
                          ("incoherent", incoherent_rays(int(s["incoherent_rays"])))):

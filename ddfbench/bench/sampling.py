@@ -13,7 +13,7 @@ import numpy as np
 import open3d as o3d
 
 from ddfbench.bench.context import Context, preset
-from ddfbench.bench.oracle import bare_scene
+from ddfbench.oracle import open3d_scene
 from ddfbench.bench.results import SectionResult, Target, compare
 from ddfbench.bench.timing import measure
 from ddfbench.bench.views import incoherent_rays
@@ -24,7 +24,7 @@ TARGET = Target(">=", 0.3)
 
 def bare_cast_rate(mesh, n: int, seed: int = 0) -> float:
     """Median rays/s of open3d cast_rays over 3 calls of n incoherent rays (origins in the box, uniform directions)."""
-    scene = bare_scene(mesh)
+    scene = open3d_scene(mesh)
     rays = o3d.core.Tensor(np.hstack(incoherent_rays(n, seed)))
     scene.cast_rays(rays[:1000])  # builds the BVH
     times = []

@@ -10,7 +10,7 @@ The model config's optional `trace` mapping sets TraceOptions.
 from __future__ import annotations
 
 import abc
-from typing import Any, Mapping
+from typing import Any, Callable, Mapping
 
 import numpy as np
 import torch
@@ -19,8 +19,9 @@ import trimesh
 from ddfbench import extract
 from ddfbench.errors import InputError
 from ddfbench.geometry import BOX_HALF
-from ddfbench.representation import Hits, Representation
+from ddfbench.representation import Budget, FitData, FitStats, Hits, Probe, Representation
 from ddfbench.trace import TraceOptions, autograd_normals, sphere_trace, to_hits
+from ddfbench.train import Schedule, train_loop
 
 FIELD_BATCH = 65536  # points per field call when evaluating numpy arrays
 
@@ -98,6 +99,24 @@ class NetSDFFamily(SDFFamily):
 
     def n_params(self) -> int:
         return int(sum(p.numel() for p in self.net.parameters()))
+
+    def _sdf_tensors(self, data: FitData) -> tuple[torch.Tensor, torch.Tensor]:
+        """The SDF samples on self.device: points x (N, 3) and signed distances (N,), float32 unit-cube
+        units; an InputError naming the family where the sampler gave none."""
+        samples = data.samples
+        if samples is None or samples.sdf is None:
+            raise InputError(f"{self.family}: fit needs SDF samples (x, sdf); the sampler gave none")
+        return (torch.from_numpy(np.asarray(samples.x, np.float32)).to(self.device),
+                torch.from_numpy(np.asarray(samples.sdf, np.float32)).to(self.device))
+
+    def _train(self, module: torch.nn.Module, optimizer: torch.optim.Optimizer, step_fn: Callable[[int], torch.Tensor], budget: Budget,
+               probe: Probe | None, **kw: Any) -> FitStats:
+        """train.train_loop under the preset's lr schedule (cfg) and grad_clip, probe(self) at the budget's
+        probes; kw goes to train_loop (state: other objects its checkpoint keeps)."""
+        grad_clip = self.cfg.get("grad_clip")
+        return train_loop(module, optimizer, step_fn, budget, Schedule.from_cfg(self.cfg),
+                          (lambda: probe(self)) if probe is not None else None,
+                          grad_clip=float(grad_clip) if grad_clip else None, desc=self.family, **kw)
 
     def save(self, path: str) -> str:
         return self._save_network(path, {k: v.detach().cpu() for k, v in self.net.state_dict().items()})

@@ -37,7 +37,6 @@ import math
 from dataclasses import replace
 from typing import Any, Mapping
 
-import numpy as np
 import torch
 import torch.nn.functional as F
 from torch import nn
@@ -50,7 +49,7 @@ from ddfbench.models._stride1_pool import Stride1MaxPool1d
 from ddfbench.models.neural_sdf import clamped_l1
 from ddfbench.representation import Budget, FitData, FitStats, Probe
 from ddfbench.trace import autograd_normals
-from ddfbench.train import Schedule, seed_everything, train_loop
+from ddfbench.train import seed_everything
 
 GRAD_BATCH = 128  # fewest points a call through the Conv1d modules: their forward is fastest at 64-256 a call,
                   # by the run (reports/bench/field_cost and its repeats, no grad; autograd passes not timed there)
@@ -150,17 +149,14 @@ class GanSDF(NetSDFFamily):
         return torch.cat([n for n, _ in parts]), torch.cat([v for _, v in parts]), m, m
 
     def fit(self, data: FitData, budget: Budget, probe: Probe | None = None) -> FitStats:
-        samples = data.samples
-        if samples is None or samples.sdf is None:
-            raise InputError("gan_sdf: fit needs SDF samples (x, sdf); the sampler gave none")
         cfg = self.cfg
-        seed_everything(budget.seed)
         self.device = budget.device
+        x, s = self._sdf_tensors(data)
+        s = s * self.scale
+        seed_everything(budget.seed)
         g = self.net = generator().to(self.device)
         d = discriminator(bool(cfg.get("spectral_norm", False))).to(self.device)
         both = nn.ModuleDict({"G": g, "D": d})  # the NaN guard watches both networks
-        x = torch.from_numpy(np.asarray(samples.x, np.float32)).to(self.device)
-        s = torch.from_numpy(np.asarray(samples.sdf, np.float32)).to(self.device) * self.scale
         batch = min(int(cfg.get("batch", 1024)), len(x))
         epochs = cfg.get("epochs")
         if epochs is not None:
@@ -200,11 +196,7 @@ class GanSDF(NetSDFFamily):
                 loss = loss + w_anchor * clamped_l1(pred, sb, anchor_delta)
             return loss
 
-        grad_clip = cfg.get("grad_clip")
-        stats = train_loop(both, opt_g, step_fn, budget, Schedule.from_cfg(cfg),
-                           (lambda: probe(self)) if probe is not None else None,
-                           grad_clip=float(grad_clip) if grad_clip else None, desc="gan_sdf",
-                           state={"optimizer_d": opt_d})
+        stats = self._train(both, opt_g, step_fn, budget, probe, state={"optimizer_d": opt_d})
         stats.extra.update(n_params=self.n_params(), epochs=stats.steps * batch / len(x))
         return stats
 

@@ -24,7 +24,6 @@ from __future__ import annotations
 import math
 from typing import Any, Mapping
 
-import numpy as np
 import torch
 from torch import nn
 
@@ -32,7 +31,7 @@ from ddfbench.errors import InputError
 from ddfbench.geometry import BOX_HALF, FourierFeatures
 from ddfbench.models._sdf_family import NetSDFFamily
 from ddfbench.representation import Budget, FitData, FitStats, Probe
-from ddfbench.train import Schedule, seed_everything, train_loop
+from ddfbench.train import seed_everything
 
 _ARCH_KEYS = ("n_harmonics", "omega0", "width", "depth", "activation", "softplus_beta")
 
@@ -106,14 +105,10 @@ class NeuralSDF(NetSDFFamily):
         return net.eval()
 
     def fit(self, data: FitData, budget: Budget, probe: Probe | None = None) -> FitStats:
-        samples = data.samples
-        if samples is None or samples.sdf is None:
-            raise InputError("neural_sdf: fit needs SDF samples (x, sdf); the sampler gave none")
-        seed_everything(budget.seed)
         self.device = budget.device
+        x, s = self._sdf_tensors(data)
+        seed_everything(budget.seed)
         self.net = net = self._new_net().to(self.device)
-        x = torch.from_numpy(np.asarray(samples.x, np.float32)).to(self.device)
-        s = torch.from_numpy(np.asarray(samples.sdf, np.float32)).to(self.device)
         batch = min(int(self.cfg.get("batch", 8192)), len(x))
         delta = float(self.cfg.get("delta", 0.1))
         w_sdf, w_surf, w_eik = (float(self.cfg.get(k, v)) for k, v in
@@ -137,10 +132,7 @@ class NeuralSDF(NetSDFFamily):
             return loss
 
         optimizer = torch.optim.Adam(net.parameters(), lr=float(self.cfg.get("lr", 1e-3)))
-        grad_clip = self.cfg.get("grad_clip")
-        stats = train_loop(net, optimizer, step_fn, budget, Schedule.from_cfg(self.cfg),
-                           (lambda: probe(self)) if probe is not None else None,
-                           grad_clip=float(grad_clip) if grad_clip else None, desc="neural_sdf")
+        stats = self._train(net, optimizer, step_fn, budget, probe)
         stats.extra["n_params"] = self.n_params()
         return stats
 

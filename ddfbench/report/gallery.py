@@ -42,6 +42,7 @@ def shaded_mesh_view(mesh_path: str | None, scene_cfg: dict[str, Any]) -> np.nda
     import open3d as o3d
     import trimesh
 
+    from ddfbench.oracle import open3d_scene
     from ddfbench.render.scene import parse_scene
 
     camera = parse_scene(scene_cfg).cameras[0]
@@ -49,9 +50,7 @@ def shaded_mesh_view(mesh_path: str | None, scene_cfg: dict[str, Any]) -> np.nda
     mesh = trimesh.load(mesh_path, process=False) if mesh_path and os.path.isfile(mesh_path) else None
     if mesh is None or len(getattr(mesh, "faces", [])) == 0:
         return image
-    scene = o3d.t.geometry.RaycastingScene()
-    scene.add_triangles(o3d.core.Tensor(np.asarray(mesh.vertices, np.float32)),
-                        o3d.core.Tensor(np.asarray(mesh.faces, np.uint32)))
+    scene = open3d_scene(mesh)
     origins, directions = camera.rays()
     hit = scene.cast_rays(o3d.core.Tensor(np.concatenate([origins, directions], 1)))
     t = hit["t_hit"].numpy()
