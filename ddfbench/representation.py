@@ -92,6 +92,15 @@ class FitStats:
     message: str | None = None
     extra: dict[str, Any] = field(default_factory=dict)
 
+    @classmethod
+    def built(cls, rep: "Representation", seconds: float, extra: dict[str, Any], probe: "Probe | None") -> "FitStats":
+        """The stats of a family built in one step rather than trained (grid, mesh): step 1 took `seconds`,
+        with one probe of `rep` there when a probe is given."""
+        stats = cls(steps=1, seconds=seconds, extra=extra)
+        if probe is not None:
+            stats.probes.append({"step": 1, "seconds": seconds, **probe(rep)})
+        return stats
+
 
 # A probe maps a representation to cheap accuracy numbers; fit calls it at log-spaced points.
 Probe = Callable[["Representation"], dict[str, float]]

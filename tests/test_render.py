@@ -13,9 +13,8 @@ from omegaconf import OmegaConf
 from PIL import Image
 
 from ddfbench.errors import InputError
-from ddfbench.models import load_family
-from ddfbench.oracle import Oracle
-from ddfbench.render import render_scene
+from ddfbench.geometry import BOX_HALF
+from ddfbench.render import mesh_reference, render_scene
 from ddfbench.render.camera import Camera, orbit_cameras
 from ddfbench.render.compare import PSNR_CAP, image_metrics
 from ddfbench.render.counting import CountedTracer, clean_hits
@@ -23,7 +22,7 @@ from ddfbench.render.images import write_png
 from ddfbench.render.integrator import Frames, primary_rays, render
 from ddfbench.render.scene import parse_scene, plan_passes
 from ddfbench.render.timing import time_renders
-from ddfbench.representation import Budget, FitData, Hits, RayStatus, Representation
+from ddfbench.representation import Hits, RayStatus, Representation
 
 SCENE_DIR = os.path.join(os.path.dirname(__file__), "..", "conf", "scene")
 PRESETS = ("depth", "normals", "shaded", "path", "paper_fig4")
@@ -98,9 +97,7 @@ class Garbage(AnalyticSphere):
 
 
 def mesh_rep(mesh: trimesh.Trimesh):
-    rep = load_family("mesh")({"faces": 0})
-    rep.fit(FitData(None, mesh, Oracle(mesh)), Budget())
-    return rep
+    return mesh_reference(mesh, BOX_HALF)
 
 
 def lambert(points, normals, light, albedo):

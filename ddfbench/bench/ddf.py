@@ -22,9 +22,8 @@ from ddfbench.bench.context import DOMAIN, Context, preset
 from ddfbench.bench.results import SectionResult, Target, compare
 from ddfbench.bench.timing import measure_side_by_side, precisions
 from ddfbench.geometry import box_entry
-from ddfbench.models import load_family
 from ddfbench.models.ddf import DDF
-from ddfbench.representation import Budget, FitData
+from ddfbench.render import mesh_reference
 from ddfbench.bench.views import view_rays
 
 TARGET = Target(">=", 0.8)
@@ -54,12 +53,6 @@ def bare_forward(net: torch.nn.Module, x: torch.Tensor, d: torch.Tensor, batch: 
                 net(x[s:s + batch], d[s:s + batch])
 
 
-def mesh_rep(ctx: Context, shape_name: str, backend: str):
-    rep = load_family("mesh")({"faces": 0, "backend": backend})
-    rep.fit(FitData(None, ctx.shape(shape_name).mesh, ctx.oracle(shape_name)), Budget())
-    return rep
-
-
 def run(ctx: Context) -> SectionResult:
     s = ctx.sizes
     o, d = view_rays(int(s["px"]))
@@ -75,7 +68,8 @@ def run(ctx: Context) -> SectionResult:
                                                         "eval_batch")}
     result.details["n_params"] = rep.n_params()
 
-    meshes = {backend: mesh_rep(ctx, s["shape"], backend) for backend in ("open3d", "embree")}
+    meshes = {backend: mesh_reference(ctx.shape(s["shape"]).mesh, DOMAIN, backend=backend)
+              for backend in ("open3d", "embree")}
     for prec in precisions(ctx.device):
         kw = dict(device=ctx.device, precision=prec)
         for normals in (False, True):

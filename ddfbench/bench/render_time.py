@@ -31,23 +31,18 @@ from omegaconf import OmegaConf
 from ddfbench import CONF_DIR
 from ddfbench.bench.timing import measure_side_by_side
 from ddfbench.models import load_family
-from ddfbench.oracle import Oracle
+from ddfbench.geometry import BOX_HALF
+from ddfbench.render import mesh_reference
 from ddfbench.render.integrator import render
 from ddfbench.render.scene import parse_scene, plan_passes
 from ddfbench.render.timing import clock, compute_threads
-from ddfbench.representation import Budget, FitData, Representation
+from ddfbench.representation import Representation
 from ddfbench.shapes import load_shape
 
 
 def _config(group: str, name: str) -> dict:
     with initialize_config_dir(config_dir=os.path.join(CONF_DIR, group), version_base="1.3"):
         return OmegaConf.to_container(compose(config_name=name), resolve=True)
-
-
-def _mesh_rep(shape, faces: int) -> Representation:
-    rep = load_family("mesh")({"faces": faces})
-    rep.fit(FitData(None, shape.mesh, Oracle(shape.mesh)), Budget())
-    return rep
 
 
 def _rows(reps: list[tuple[str, float, Representation]], scene, renders: int) -> list[dict]:
@@ -88,7 +83,7 @@ def main(argv: list[str] | None = None) -> None:
     reps = []
     for faces in [0] + [int(f) for f in args.lods.split(",") if f.strip()]:
         start = time.perf_counter()
-        rep = _mesh_rep(shape, faces)
+        rep = mesh_reference(shape.mesh, BOX_HALF, faces=faces)
         name = f"mesh faces={len(rep.mesh.faces)}"
         if name in {n for n, _, _ in reps}:  # a LOD at or above the mesh's face count is the mesh itself
             print(f"--lods {faces}: as many faces as an earlier row ({name}), so not rendered again", file=sys.stderr)

@@ -47,12 +47,8 @@ class SDFFamily(Representation):
     def sdf(self, points: np.ndarray) -> np.ndarray:
         """Signed distance (N,) float32 at numpy points (N, 3), in batches."""
         p = np.asarray(points, np.float32).reshape(-1, 3)
-        out = np.empty(len(p), np.float32)
         with torch.no_grad():
-            for s in range(0, len(p), FIELD_BATCH):
-                x = torch.from_numpy(p[s : s + FIELD_BATCH]).to(self.device)
-                out[s : s + FIELD_BATCH] = self.field(x).reshape(-1).float().cpu().numpy()
-        return out
+            return extract.evaluate(lambda chunk: self.field(torch.from_numpy(chunk).to(self.device)), p, FIELD_BATCH)
 
     def _batched_field(self, points: torch.Tensor) -> torch.Tensor:
         return torch.cat([self.field(points[s : s + FIELD_BATCH]).reshape(-1) for s in range(0, len(points), FIELD_BATCH)]) \

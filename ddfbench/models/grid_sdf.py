@@ -70,10 +70,7 @@ class GridSDF(SDFFamily):
                                                     band_cells=float(self.cfg.get("band_cells", 2.0)))
         self._set_grid(grid)
         seconds = time.perf_counter() - start
-        stats = FitStats(steps=1, seconds=seconds, extra={"build": method, **info})
-        if probe is not None:
-            stats.probes.append({"step": 1, "seconds": seconds, **probe(self)})
-        return stats
+        return FitStats.built(self, seconds, {"build": method, **info}, probe)
 
     def field(self, points: torch.Tensor) -> torch.Tensor:
         half = self.domain

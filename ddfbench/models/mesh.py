@@ -60,10 +60,7 @@ class MeshFamily(Representation):
         start = time.perf_counter()
         self._set_mesh(decimate(data.mesh, int(self.cfg.get("faces", 0) or 0)), budget.device)
         seconds = time.perf_counter() - start
-        stats = FitStats(steps=1, seconds=seconds, extra={"faces": int(len(self.mesh.faces))})
-        if probe is not None:
-            stats.probes.append({"step": 1, "seconds": seconds, **probe(self)})
-        return stats
+        return FitStats.built(self, seconds, {"faces": int(len(self.mesh.faces))}, probe)
 
     def to(self, device: str) -> "MeshFamily":
         """Cast on `device` from now on (the warp backend; open3d and embree stay on the CPU)."""

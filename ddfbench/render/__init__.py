@@ -33,12 +33,13 @@ from ddfbench.representation import Budget, FitData, Representation
 __all__ = ["render_scene", "render", "parse_scene", "plan_passes", "Frames", "Scene", "mesh_reference"]
 
 
-def mesh_reference(mesh, domain: float, device: str = "cpu", backend: str = "open3d") -> Representation:
+def mesh_reference(mesh, domain: float, device: str = "cpu", backend: str = "open3d", faces: int = 0) -> Representation:
     """The full GT mesh (trimesh) as the mesh family, cast by `backend` (the oracle's: open3d | embree |
-    warp, Warp's BVH on `device`): what render_scene compares a family's frames with."""
+    warp, Warp's BVH on `device`): what render_scene compares a family's frames with. faces > 0: its
+    simplification to that many faces (a LOD, as the mesh family's `faces` builds it)."""
     from ddfbench.models import load_family
 
-    reference = load_family("mesh")({"faces": 0, "backend": backend}, domain=domain)
+    reference = load_family("mesh")({"faces": int(faces), "backend": backend}, domain=domain)
     reference.fit(FitData(samples=None, mesh=mesh, oracle=None), Budget(device=device))
     return reference
 
