@@ -41,16 +41,19 @@ def make_ddf(overrides: dict, device: str) -> DDF:
     return rep
 
 
-def bare_forward(net: torch.nn.Module, x: torch.Tensor, d: torch.Tensor, batch: int, backward: bool) -> None:
-    """The network on (x, d) chunks; with backward, grad_x of the distance by one backward pass per chunk."""
-    for s in range(0, len(x), batch):
-        if backward:
-            xs = x[s:s + batch].detach().requires_grad_(True)
-            t, _ = net(xs, d[s:s + batch])
-            torch.autograd.grad(t.sum(), xs)
-        else:
-            with torch.no_grad():
-                net(x[s:s + batch], d[s:s + batch])
+def bare_forward(net: torch.nn.Module, x: torch.Tensor, d: torch.Tensor, batch: int, backward: bool = False,
+                 dtype: torch.dtype | None = None) -> None:
+    """The network alone on points x (N, 3) and unit directions d (N, 3) in chunks of `batch`; with backward,
+    grad_x of the distance by one backward pass per chunk; with dtype (torch.bfloat16), under autocast."""
+    with torch.autocast(x.device.type, dtype=dtype or torch.float32, enabled=dtype is not None):
+        for s in range(0, len(x), batch):
+            if backward:
+                xs = x[s:s + batch].detach().requires_grad_(True)
+                t, _ = net(xs, d[s:s + batch])
+                torch.autograd.grad(t.sum(), xs)
+            else:
+                with torch.no_grad():
+                    net(x[s:s + batch], d[s:s + batch])
 
 
 def run(ctx: Context) -> SectionResult:

@@ -38,6 +38,7 @@ import torch
 
 from ddfbench import plugins
 from ddfbench.bench.context import Context, model_preset, preset
+from ddfbench.bench.ddf import bare_forward
 from ddfbench.bench.results import SectionResult, Target, compare
 from ddfbench.bench.timing import Timing, measure_side_by_side
 from ddfbench.bench.views import incoherent_rays, view_rays
@@ -80,18 +81,12 @@ def train_ddf(ctx: Context, samples, overrides: dict) -> tuple[DDF, dict]:
                  "n_params": rep.n_params(), **{k: rep.cfg[k] for k in ("width", "depth")}}
 
 
-def bare_forward(rep: DDF, o: torch.Tensor, d: torch.Tensor, chunk: int, precision: str) -> Callable[[], None]:
-    """The network alone on the box-entry points of the rays (computed once, outside the timing)."""
+def entry_forward(rep: DDF, o: torch.Tensor, d: torch.Tensor, chunk: int, precision: str) -> Callable[[], None]:
+    """The network alone (bench.ddf.bare_forward) on the box-entry points of rays o, d (N, 3) (computed once,
+    outside the timing), in fp32 or under bf16 autocast."""
     x = o + box_entry(o, d, rep.domain)[0][:, None] * d
     dtype = torch.bfloat16 if precision == "bf16" else None
-
-    @torch.no_grad()
-    def run() -> None:
-        with torch.autocast(x.device.type, dtype=dtype or torch.float32, enabled=dtype is not None):
-            for s in range(0, len(x), chunk):
-                rep.net(x[s : s + chunk], d[s : s + chunk])
-
-    return run
+    return lambda: bare_forward(rep.net, x, d, chunk, dtype=dtype)
 
 
 def ddf_variants(ctx: Context, rep: DDF, compile_too: bool, details: dict | None = None) -> dict[str, DDFDepth]:
@@ -196,7 +191,7 @@ def _race_all(ctx: Context, result: SectionResult, samples, ddf, nsdf, gsdf, war
     for set_name, (o_np, d_np) in ray_sets.items():
         n = len(o_np)
         o_dev, d_dev = torch.as_tensor(o_np, device=ctx.device), torch.as_tensor(d_np, device=ctx.device)
-        bare = {f"ddf_bare_{p}": (lambda o, d, on, dn, f=bare_forward(ddf, o_dev, d_dev, chunk, p): f())
+        bare = {f"ddf_bare_{p}": (lambda o, d, on, dn, f=entry_forward(ddf, o_dev, d_dev, chunk, p): f())
                 for p in ("fp32", "bf16")}  # on the set's own entry points
         timed = race(ctx, o_np, d_np, {**contestants, **bare})
         t_ref = reference(o_np, d_np)
