@@ -78,6 +78,8 @@ def test_details_agree_with_what_was_measured(small_run):
         # the naive loop evaluates every ray twice per step for max_steps steps
         assert d["naive_evals"] == 2 * TraceOptions().max_steps * d["rays"], key
         assert 0 < d["tracer_evals"] < d["naive_evals"]
+        # the tracer's host round trips: 2 at the start, then 2 or 3 a step (tests/test_trace.py)
+        assert 4 <= d["tracer_host_syncs"] <= 2 + 3 * TraceOptions().max_steps
     for key, d in s["grid"]["details"].items():
         h = 2 * 0.6 / (int(key.split("=")[1]) - 1)
         assert d["errors"]["max_err_band"] <= h  # the band is exact: only sign errors could reach it

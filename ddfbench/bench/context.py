@@ -11,6 +11,8 @@ from ddfbench import plugins
 from ddfbench.bench.results import SectionResult
 from ddfbench.geometry import BOX_HALF
 from ddfbench.oracle import Oracle
+from ddfbench.representation import Budget, FitData, Representation
+from ddfbench.samples import Samples
 from ddfbench.shapes import Shape, load_shape
 
 DOMAIN = BOX_HALF  # conf/config.yaml `domain`: half-side of the field box
@@ -57,3 +59,12 @@ class Context:
             device = self.device if backend == "warp" else "cpu"  # Warp's CPU kernels run on one core
             self._oracles[(name, backend)] = Oracle(self.shape(name).mesh, backend=backend, device=device)
         return self._oracles[(name, backend)]
+
+    def timed_fit(self, rep: Representation, samples: Samples) -> dict[str, Any]:
+        """rep fit on samples of the sizes' shape for the sizes' fit_seconds on this device, no probes:
+        {fit_steps, fit_seconds, fit_status}."""
+        name = self.sizes["shape"]
+        stats = rep.fit(FitData(samples, self.shape(name).mesh, self.oracle(name)),
+                        Budget(max_steps=10**9, max_seconds=float(self.sizes["fit_seconds"]), device=self.device,
+                               n_probes=0))
+        return {"fit_steps": stats.steps, "fit_seconds": stats.seconds, "fit_status": stats.status}

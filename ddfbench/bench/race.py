@@ -48,7 +48,6 @@ from ddfbench.geometry import box_entry
 from ddfbench.embree_pool import EmbreePool
 from ddfbench.errors import one_line
 from ddfbench.models.ddf import DDF
-from ddfbench.representation import Budget, FitData
 from ddfbench.sampling import surface
 
 SPEED_GOAL = Target(">=", 1e9, on="value")  # the fastest DDF variant's rays/s at 1M+ rays on an H100/H200 (issue 17)
@@ -72,13 +71,9 @@ def pareto_ddf_capacities() -> dict[str, dict]:
 
 
 def train_ddf(ctx: Context, samples, overrides: dict) -> tuple[DDF, dict]:
-    s = ctx.sizes
-    shape, oracle = ctx.shape(s["shape"]), ctx.oracle(s["shape"])
+    """conf/model/<DDF_PRESET>.yaml with overrides, fit for the sizes' fit_seconds (Context.timed_fit)."""
     rep = DDF(model_preset(DDF_PRESET, **overrides))
-    stats = rep.fit(FitData(samples, shape.mesh, oracle),
-                    Budget(max_steps=10**9, max_seconds=float(s["fit_seconds"]), device=ctx.device, n_probes=0))
-    return rep, {"fit_steps": stats.steps, "fit_seconds": stats.seconds, "fit_status": stats.status,
-                 "n_params": rep.n_params(), **{k: rep.cfg[k] for k in ("width", "depth")}}
+    return rep, {**ctx.timed_fit(rep, samples), "n_params": rep.n_params(), **{k: rep.cfg[k] for k in ("width", "depth")}}
 
 
 def entry_forward(rep: DDF, o: torch.Tensor, d: torch.Tensor, chunk: int, precision: str) -> Callable[[], None]:

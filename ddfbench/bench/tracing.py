@@ -50,10 +50,7 @@ def neural_sdf(ctx: Context, preset: str = "neural_sdf") -> tuple[NeuralSDF, dic
     s = ctx.sizes
     shape, oracle = ctx.shape(s["shape"]), ctx.oracle(s["shape"])
     rep = NeuralSDF(model_preset(preset, **dict(s.get("neural") or {})))
-    samples = oracle_sdf_samples(shape.mesh, oracle, int(s["n_samples"]), seed=0)
-    stats = rep.fit(FitData(samples, shape.mesh, oracle),
-                    Budget(max_steps=10**9, max_seconds=float(s["fit_seconds"]), device=ctx.device, n_probes=0))
-    return rep, {"fit_steps": stats.steps, "fit_seconds": stats.seconds, "fit_status": stats.status}
+    return rep, ctx.timed_fit(rep, oracle_sdf_samples(shape.mesh, oracle, int(s["n_samples"]), seed=0))
 
 
 def grid_sdf(ctx: Context) -> tuple[GridSDF, dict]:
