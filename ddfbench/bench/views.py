@@ -7,6 +7,8 @@ import numpy as np
 
 from ddfbench.geometry import BOX_HALF
 from ddfbench.render.camera import Camera
+from ddfbench.sampling.box import uniform_in_box
+from ddfbench.sampling.directions import uniform_directions
 
 EYE = (0.9, 0.5, 1.2)  # camera position in the normalized frame: the shape fills most of a 40 degree view
 
@@ -19,5 +21,5 @@ def view_rays(size: int, eye=EYE, fov_deg: float = 40.0) -> tuple[np.ndarray, np
 def incoherent_rays(n: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
     """n rays (n, 3), (n, 3) float32: origins uniform in the field box, unit directions uniform on the sphere."""
     rng = np.random.default_rng(seed)
-    d = rng.standard_normal((n, 3)).astype(np.float32)
-    return rng.uniform(-BOX_HALF, BOX_HALF, (n, 3)).astype(np.float32), d / np.linalg.norm(d, axis=1, keepdims=True)
+    d = uniform_directions(rng, n)
+    return uniform_in_box(rng, n, BOX_HALF), d
