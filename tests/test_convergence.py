@@ -63,6 +63,17 @@ def test_report_writes_the_band_plot_and_the_time_to_floor_table(tmp_path):
     assert probes.count("| neural_sdf |") == 18 and "Every probe of every run" in (out / "report.md").read_text()
 
 
+def test_a_sweep_renamed_by_experiment_name_keeps_its_experiment_files_sections(tmp_path):
+    for s in range(2):
+        r = {**run("gan_sdf", "bunny", s, [(1, 1e-3), (10, 1e-4)]), "experiment": "gan_epochs_b256"}
+        r["overrides"] += ["+experiment=gan_epochs", "experiment_name=gan_epochs_b256"]
+        write_json_atomic(str(tmp_path / "rec" / r["key"] / "record.json"), r)
+    assert report_main([str(tmp_path / "rec"), "--out", str(tmp_path / "rep")]) == 0
+    assert "| gan_sdf | bunny | 2 | 0 of 2 |" in (tmp_path / "rep" / "stability.md").read_text()
+    assert (tmp_path / "rep" / "convergence.png").exists()  # gan_epochs' plots, not the default ones
+    assert (tmp_path / "rep" / "report.md").read_text().startswith("# gan_epochs_b256")
+
+
 def test_probe_rows_are_each_ok_runs_probes_in_seed_and_step_order_with_their_epoch():
     late = run("gan_sdf", "bunny", 1, [(5.0, 2e-3), (50.0, 4e-4)])
     late["fit"].update(steps=4, epochs=2.0)  # 2 steps an epoch

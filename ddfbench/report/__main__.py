@@ -44,6 +44,15 @@ def _experiment(records: list[dict[str, Any]], records_dir: str) -> str:
     return names.most_common(1)[0][0] if names else os.path.basename(os.path.normpath(records_dir))
 
 
+def _experiment_file(records: list[dict[str, Any]], experiment: str) -> str:
+    """The conf/experiment file the runs were launched with (their `+experiment=NAME` override), which picks
+    the report's plots and sections: a sweep renamed by experiment_name (gan_epochs_b256) keeps its file's
+    sections. The experiment's name where no run names a file."""
+    files = Counter(o.split("=", 1)[1] for r in records for o in r.get("overrides") or []
+                    if o.lstrip("+").startswith("experiment="))
+    return files.most_common(1)[0][0] if files else experiment
+
+
 def _sweep_lines(records_dir: str, sweep: list[str] | None) -> list[str]:
     """The sweep's status (done / failed / missing), or one line saying why it is unknown.
     sweep: the sweep's overrides (default: the newest sweep of this experiment, see status.py)."""
@@ -116,15 +125,16 @@ def write_report(records_dir: str, out_dir: str, note: str | None = None,
         fh.write(to_latex(df))
     to_csv(df, os.path.join(out_dir, "table.csv"))
     experiment = _experiment(records, records_dir)
-    written = write_plots(records, out_dir, kinds if kinds is not None else plots_for(experiment))
+    kind = _experiment_file(records, experiment)
+    written = write_plots(records, out_dir, kinds if kinds is not None else plots_for(kind))
     gallery = write_gallery(records, out_dir, caption=note)
     written += [gallery] if gallery else []
-    pairs = paired_report(experiment, records)
+    pairs = paired_report(kind, records)
     if pairs is not None:
         with open(os.path.join(out_dir, "paired.md"), "w") as fh:
             fh.write(pairs)
     extra = [pairs] if pairs is not None else []
-    if experiment in ("convergence", "paper_ddf", "gan_epochs"):
+    if kind in ("convergence", "paper_ddf", "gan_epochs"):
         rows = convergence.time_to_floor_rows(records)
         extra.append(_write_section(out_dir, "time_to_floor", "Time to reach the noise floor", rows,
                                     convergence.to_markdown(rows)))
@@ -159,7 +169,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", help="report folder (default: reports/<name of the records folder>)")
     parser.add_argument("--note", help="a line written at the top of report.md (e.g. 'reduced budget: ...')")
     parser.add_argument("--plots", help=f"comma-separated plot kinds ({', '.join(PLOTS)}; 'none' for no plot); "
-                                        "default: by the experiment's name")
+                                        "default: by the runs' experiment file (+experiment=NAME), else its name")
     parser.add_argument("--sweep", nargs="+", metavar="OVERRIDE",
                         help="the sweep's overrides for the status in report.md (default: its newest sweep)")
     parser.add_argument("--allow-mixed-commits", action="store_true",

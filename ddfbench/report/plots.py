@@ -12,7 +12,7 @@ no data for it; failed records are left out of every plot, the tables flag them)
                model and size are averaged)
   ablation     chamfer L2 against each surface-sampling density (s_fc, s_dr, s_p), the others at
                their base (lowest) level: one line per factor
-Which kinds an experiment gets: PLOTS_BY_EXPERIMENT (by the records' experiment name), else
+Which kinds an experiment gets: PLOTS_BY_EXPERIMENT (by the runs' experiment file, +experiment=NAME), else
 DEFAULT_PLOTS; `python -m ddfbench.report --plots` chooses explicitly.
 Accuracy is the record's chamfer L2 (squared, raw, not ×10³); seeds are averaged (error bars: std).
 """
