@@ -102,12 +102,14 @@ def topology(mesh: trimesh.Trimesh) -> dict[str, Any]:
     return {"closed": bool(merged.is_watertight), "components": int(connected_components(graph, directed=False)[0])}
 
 
-def point_to_surface(points: np.ndarray, mesh: trimesh.Trimesh) -> np.ndarray:
-    """Exact unsigned distance (N,) float64 from points (N,3) to the triangles of mesh: an oracle of the mesh with
-    the backend that answers every query here (open3d, or Warp where open3d is not installed)."""
+def point_to_surface(points: np.ndarray, mesh: trimesh.Trimesh, signed: bool = False) -> np.ndarray:
+    """Exact distance (N,) float64 from points (N,3) to the triangles of mesh, negative inside where signed (the
+    oracle's voted inside test): an oracle of the mesh with the backend that answers every query here (open3d,
+    or Warp where open3d is not installed)."""
     from ddfbench.oracle import Oracle, full_backend
 
-    return Oracle(mesh, full_backend()).unsigned_distance(points).astype(np.float64)
+    oracle = Oracle(mesh, full_backend())
+    return (oracle.signed_distance(points) if signed else oracle.unsigned_distance(points)).astype(np.float64)
 
 
 def cloud_metrics(gt: np.ndarray, rec: np.ndarray, radii: Sequence[float]) -> dict[str, Any]:
@@ -168,9 +170,13 @@ def geometry_metrics(
         out.update(topology(rec))
         if with_point_to_surface:
             to_rec = point_to_surface(gt_pts, rec)
-            to_gt = point_to_surface(rec_pts, gt)
+            signed_to_gt = point_to_surface(rec_pts, gt, signed=True)
+            to_gt = np.abs(signed_to_gt)
             out["p2s_chamfer_l2"] = chamfer_l2_of(to_rec, to_gt)
             out["p2s_chamfer_l1"] = chamfer_l1_of(to_rec, to_gt)
+            # > 0: the reconstruction lies outside GT on average (inflated), < 0 inside; |offset| near the
+            # p2s chamfer L1 says the error is a shifted level rather than noise about the surface
+            out["level_offset"] = float(signed_to_gt.mean())
     if noise_floor:
         resample, _ = sample_surface(gt, n_points, seed + 2)
         floor = distance_metrics(nearest_distance(gt_pts, resample)[0], nearest_in(gt_tree, resample)[0], radii)

@@ -79,6 +79,20 @@ def test_geometry_metrics_noise_floor_and_point_to_surface():
     assert m2["fscore"]["0.01"] < 0.05 and m2["fscore"]["0.02"] < 0.05
 
 
+def test_level_offset_is_signed_shift_of_the_surface():
+    """A sphere inflated by 0.05 is 0.05 outside GT on average, a deflated one 0.05 inside; GT against
+    itself and a surface noisy on both sides sit near 0 while their p2s chamfer does not."""
+    sphere = trimesh.creation.icosphere(4, 0.5)
+    assert abs(metrics.geometry_metrics(sphere, sphere, 5000, [0.01], seed=0)["level_offset"]) < 1e-6
+    for radius, offset in ((0.55, 0.05), (0.45, -0.05)):
+        m = metrics.geometry_metrics(sphere, trimesh.creation.icosphere(4, radius), 5000, [0.01], seed=0)
+        assert np.isclose(m["level_offset"], offset, rtol=0.05)
+    bumpy = sphere.copy()
+    bumpy.vertices *= 1 + np.random.default_rng(0).uniform(-0.1, 0.1, (len(bumpy.vertices), 1))  # out and in
+    m = metrics.geometry_metrics(sphere, bumpy, 5000, [0.01], seed=0)
+    assert abs(m["level_offset"]) < 0.2 * m["p2s_chamfer_l1"]
+
+
 def test_empty_reconstruction_gets_penalty_not_exception():
     sphere = trimesh.creation.icosphere(3, 0.5)
     empty = trimesh.Trimesh(np.zeros((0, 3)), np.zeros((0, 3), int))
