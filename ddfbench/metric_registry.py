@@ -99,9 +99,10 @@ METRICS: list[Metric] = [
     *[fscore(r) for r in FSCORE_RADII],
     *_sided("gt_to_rec", "GT→rec"),
     *_sided("rec_to_gt", "rec→GT"),
-    # mean signed distance of the reconstruction's points to GT (metrics.geometry_metrics; + outside): a level
-    # set shifted off the surface; 0 is best in either direction, so it is never marked best; none when empty
-    Metric("level_offset", ("metrics", "level_offset"), "offset ×10³", 1e3, better=""),
+    # mean signed distance of the reconstruction's points to GT (metrics.geometry_metrics; + outside, the opposite
+    # of ddfbench.zero_level's field offset): a level set shifted off the surface; 0 is best in either direction,
+    # so it is never marked best; none when empty
+    Metric("level_offset", ("metrics", "level_offset"), "level offset ×10³ (+out)", 1e3, better=""),
     Metric("normal_consistency", ("metrics", "normal_consistency"), "NC", better="high", penalty=0.0),
     # topology of the reconstruction (metrics.topology); a table's mean of `closed` is the share of closed
     # meshes; an empty mesh is not closed and has no piece count (its row's cell says "(of k)")

@@ -101,6 +101,7 @@ def test_empty_reconstruction_gets_penalty_not_exception():
     assert m["fscore"]["0.01"] == 0.0
     assert np.isfinite(m["chamfer_l2"]) and m["chamfer_l2"] >= PENALTY_DISTANCE**2
     assert m["closed"] == 0.0 and "components" not in m  # no piece count for an empty mesh: left out of means
+    assert "level_offset" not in m  # nor an offset: an empty mesh has no points to be inside or outside
 
 
 def test_topology_counts_pieces_and_finds_holes():

@@ -292,7 +292,7 @@ def _footnotes(df: pd.DataFrame) -> list[str]:
                      "surface near the other: the fit never found the shape); their measured metrics stay in the mean.")
     if _partial_metrics(df):
         lines.append("(of k): the value is defined in k of the row's n runs (a depth error needs pixels that both "
-                     "the render and the reference hit); its mean, std and interval are over those k.")
+                     "the render and the reference hit, a level offset a non-empty mesh); its mean, std and interval are over those k.")
     if "not_converged" in df and df["not_converged"].astype(bool).any():
         lines.append(f"{NOT_CONVERGED}: every run's reconstruction was empty or off the shape, so the row is not a method "
                      "result: its geometry cells are blank (table.csv keeps the values), it is not ranked, and its steps "
