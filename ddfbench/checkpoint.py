@@ -12,6 +12,9 @@ result is bit-identical to an uninterrupted fit's (tests/test_checkpoint.py).
 A file written by other code (its `tag`: code_fingerprint(), a hash of the package's source, so an
 uncommitted edit counts), for another fit (the loop's label: family, seed, steps, device, threads,
 torch version) or one that cannot be read is not loaded: the fit starts over and says so in the log.
+A readable file of other code or another fit is not overwritten but set aside beside it, named by a hash
+of its fit and tag (<path>.<12 hex>.pt), and a later load by that code for that fit takes it back: a rerun
+by mistake on another thread count, say, costs no hours of a long fit.
 A save that fails is logged and the fit goes on. The file holds tensors, numbers, strings and
 containers only, and is read with weights_only=True (DESIGN.md, Safety). The runner keeps it at
 <run dir>/fit_checkpoint.pt and deletes it once an ok record is written (and before a force=true rerun):
@@ -63,24 +66,48 @@ class Checkpoint:
 
     def load(self, fit: str) -> dict[str, Any] | None:
         """The saved state of fit `fit` (the loop's label of what is trained), or None: no file, one that
-        cannot be read, or one written by other code or for another fit (logged; the fit starts over)."""
+        cannot be read, or one written by other code or for another fit (set aside, logged; the fit starts
+        over). A checkpoint of this fit by this code that an earlier load set aside is taken back."""
         if not os.path.exists(self.path):
-            return None
+            return self._take_back(fit)
         try:  # tensors, numbers, strings and containers only: a results folder may come from someone else
             state = torch.load(self.path, map_location="cpu", weights_only=True)
         except Exception as exc:  # truncated, corrupt or holding other objects: start over rather than fail the run
             log.warning("%s: unreadable, or of an older format (%s): the fit starts over", self.path, exc)
             return None
-        if not isinstance(state, dict) or state.get("format") != FORMAT or state.get("tag") != self.tag \
-                or state.get("fit") != fit:
-            got = (state.get("fit"), state.get("tag")) if isinstance(state, dict) else (None, None)
-            log.warning("%s: written for %s by code %s, not %s by %s: the fit starts over", self.path, *got, fit, self.tag)
+        if not isinstance(state, dict) or state.get("format") != FORMAT:
+            log.warning("%s: of an older format: the fit starts over", self.path)
             return None
-        return state
+        if state.get("tag") == self.tag and state.get("fit") == fit:
+            return state
+        aside = self._aside(str(state.get("fit")), str(state.get("tag")))
+        os.replace(self.path, aside)
+        log.warning("%s: written for %s by code %s, not %s by %s: set aside as %s, where a run of that fit by "
+                    "that code finds it", self.path, state.get("fit"), state.get("tag"), fit, self.tag,
+                    os.path.basename(aside))
+        resumed = self._take_back(fit)
+        if resumed is None:
+            log.warning("%s: no checkpoint of %s by %s: the fit starts over", self.path, fit, self.tag)
+        return resumed
+
+    def _aside(self, fit: str, tag: str) -> str:
+        """Where a checkpoint of fit `fit` by code `tag` waits while another fit uses self.path."""
+        digest = hashlib.sha256("\n".join((fit, tag)).encode()).hexdigest()[:12]
+        return f"{self.path}.{digest}.pt"
+
+    def _take_back(self, fit: str) -> dict[str, Any] | None:
+        """The set-aside checkpoint of fit `fit` by this code, moved back to self.path and loaded, or None."""
+        aside = self._aside(fit, self.tag)
+        if not os.path.exists(aside):
+            return None
+        os.replace(aside, self.path)
+        log.warning("%s: taken back from %s", self.path, os.path.basename(aside))
+        return self.load(fit)
 
     def remove(self) -> None:
-        """Delete the checkpoint and any temporary file a killed save left."""
-        for path in (self.path, *glob.glob(f"{glob.escape(self.path)}.*.tmp")):
+        """Delete the checkpoint, those set aside and any temporary file a killed save left."""
+        stem = glob.escape(self.path)
+        for path in (self.path, *glob.glob(f"{stem}.*.tmp"), *glob.glob(f"{stem}.*.pt")):
             if os.path.exists(path):
                 os.remove(path)
 

@@ -131,6 +131,20 @@ def test_the_code_fingerprint_follows_the_source(tmp_path):
     assert code_fingerprint() == code_fingerprint(os.path.dirname(ddfbench.__file__))  # by default: ddfbench's own
 
 
+def test_a_checkpoint_of_another_fit_is_set_aside_not_overwritten_and_its_own_fit_takes_it_back(tmp_path):
+    two, one = Checkpoint(str(tmp_path / "fit.pt"), tag="code-a"), Checkpoint(str(tmp_path / "fit.pt"), tag="code-a")
+    two.save({"fit": "gan 2 threads", "step": 24787})  # hours of a fit on 2 threads
+    assert one.load("gan 1 thread") is None  # rerun by mistake on 1 thread: starts over ...
+    one.save({"fit": "gan 1 thread", "step": 5})  # ... and saves where the 2-thread fit was
+    assert two.load("gan 2 threads")["step"] == 24787  # the 2-thread rerun goes on from its own
+    assert one.load("gan 1 thread")["step"] == 5  # and the 1-thread one from its own
+    newer = Checkpoint(str(tmp_path / "fit.pt"), tag="code-b")
+    assert newer.load("gan 2 threads") is None  # other code does not resume either fit
+    assert len(list(tmp_path.glob("fit.pt.*.pt"))) == 2
+    one.remove()  # an ok record: every checkpoint of the run goes
+    assert not list(tmp_path.iterdir())
+
+
 class Stranger:
     """An object a results folder from someone else could smuggle into a checkpoint."""
 
