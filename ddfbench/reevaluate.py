@@ -1,5 +1,5 @@
 """python -m ddfbench.reevaluate RESULTS/<experiment> --out DIR [--n-points N] [--scene NAME] [--model M ...]
-                                [--threads N]
+                                [--threads N] [--store-as float16|float32]
 
 The finished runs of an experiment measured again at other evaluation settings, from what each run
 saved: its reconstruction (reconstruction.ply) against its GT mesh (gt_mesh.ply) at N surface points
@@ -7,7 +7,10 @@ per mesh and the record's own radii and seed, and, with --scene, its saved model
 with conf/scene/<NAME>.yaml (or `record`: the run's own scene) against the GT mesh's BVH (one timed render: timings are not the point; a
 float16 storage level renders its rounded weights). A sweep whose probes needed a small point count
 (convergence: 20k) is so compared with targets stated at the 100k points of every other experiment,
-and gets image metrics it did not render, without refitting. The records are not changed. DIR gets
+and gets image metrics it did not render, without refitting. With --store-as, each saved network (a
+family with a storage_dtype: the DDF) is stored again at that dtype, which rounds it, and meshed anew at
+its record's mesh_resolution: what a float16 artifact of the same fit would measure, paired by seed with
+the plain run (storage_bytes follows). The records are not changed. DIR gets
 table.md (its first line: the command, the records' code commits and the measuring code's) /
 table.csv (report.tables: one row per configuration, seeds pooled, empty meshes at their
 penalty, the noise floor at this point count) and runs.csv (a row per run, with its swept values). A run whose artifacts
@@ -32,6 +35,7 @@ from ddfbench.geometry import BOX_HALF
 from ddfbench.metrics import geometry_metrics
 from ddfbench.models import load_family
 from ddfbench.report import tables
+from ddfbench.representation import Representation
 from ddfbench.runs import code_commits, code_sha, find_records
 
 RECORD_SCENE = "record"  # --scene record: each run's own scene as its record gives it
@@ -53,12 +57,28 @@ def _reconstruction(rec: dict[str, Any]) -> trimesh.Trimesh:
     return trimesh.load(artifact(rec, "reconstruction"), force="mesh", process=False)
 
 
-def _image_metrics(rec: dict[str, Any], gt: trimesh.Trimesh, scene: dict[str, Any]) -> dict[str, Any]:
-    """The saved model rendered with `scene` against the GT mesh (render.render_scene's image metrics)."""
+def _saved_model(rec: dict[str, Any]) -> Representation:
+    """The run's saved model, loaded for the record's field box."""
+    return load_family(rec["family"]).load(artifact(rec, "model"), domain=float(rec["config"].get("domain", BOX_HALF)))
+
+
+def _stored_as(rep: Representation, dtype: str, where: str) -> int:
+    """Save `rep` again (into a temporary folder) with storage_dtype `dtype`, which rounds it as a user's
+    artifact of that dtype would be; the file's bytes. InputError naming `where` for a family without one."""
+    if "storage_dtype" not in rep.cfg:
+        raise InputError(f"{where}: family {rep.family} has no storage_dtype to store it as {dtype}")
+    rep.cfg["storage_dtype"] = dtype
+    with tempfile.TemporaryDirectory(prefix="ddfbench-store-") as tmp:
+        rep.save(os.path.join(tmp, "model"))
+        return int(rep.storage_bytes())
+
+
+def _image_metrics(rec: dict[str, Any], rep: Representation, gt: trimesh.Trimesh,
+                   scene: dict[str, Any]) -> dict[str, Any]:
+    """The run's model `rep` rendered with `scene` against the GT mesh (render.render_scene's image metrics)."""
     from ddfbench.render import mesh_reference, render_scene  # the renderer's imports are only needed with a scene
 
     domain = float(rec["config"].get("domain", BOX_HALF))
-    rep = load_family(rec["family"]).load(artifact(rec, "model"), domain=domain)
     once = {**scene, "timing": {**(scene.get("timing") or {}), "repeats": 1, "warmup": 0}}
     with tempfile.TemporaryDirectory(prefix="ddfbench-reeval-") as tmp:
         seed = int(rec["config"].get("seed", 0))
@@ -101,20 +121,29 @@ def measured_header(tool: str, argv: list[str] | None, measured: str, records: l
             f"measured by code {(code_sha() or 'unknown')[:7]}.")
 
 
-def reevaluated(rec: dict[str, Any], n_points: int, scene: dict[str, Any] | str | None) -> dict[str, Any]:
+def reevaluated(rec: dict[str, Any], n_points: int, scene: dict[str, Any] | str | None,
+                store_as: str | None = None) -> dict[str, Any]:
     """A copy of the record whose metrics are measured again: geometry at n_points (the record's radii,
     seed and metric switches), image metrics when the scene (a scene config, or RECORD_SCENE: the
-    run's own) renders something."""
+    run's own) renders something; with store_as, of its model stored at that dtype and meshed anew."""
     cfg, ev = rec["config"], rec["config"].get("eval") or {}
     gt = trimesh.load(artifact(rec, "gt_mesh"), force="mesh", process=False)
     out = copy.deepcopy(rec)
-    out["metrics"] = geometry_metrics(gt, _reconstruction(rec), n_points, [float(r) for r in ev["radii"]],
+    rep, reconstruction = None, None
+    if store_as is not None:
+        rep = _saved_model(rec)
+        out["cost"] = {**out.get("cost", {}), "storage_bytes": _stored_as(rep, store_as, rec["_dir"])}
+        out["config"]["model"]["storage_dtype"] = store_as
+        reconstruction = rep.to_mesh(int(ev["mesh_resolution"]))
+    else:
+        reconstruction = _reconstruction(rec)
+    out["metrics"] = geometry_metrics(gt, reconstruction, n_points, [float(r) for r in ev["radii"]],
                                       seed=int(cfg.get("seed", 0)), noise_floor=bool(ev.get("noise_floor", True)),
                                       with_point_to_surface=bool(ev.get("point_to_surface", True)))
     if scene == RECORD_SCENE:
         scene = dict(cfg.get("scene") or {})
     if scene is not None and scene.get("outputs"):
-        out["metrics"].update(_image_metrics(rec, gt, scene))
+        out["metrics"].update(_image_metrics(rec, rep or _saved_model(rec), gt, scene))
     return out
 
 
@@ -123,6 +152,8 @@ def main(argv: list[str] | None = None) -> int:
                         "table.md, table.csv and runs.csv", 100_000)
     ap.add_argument("--scene", default=None, help="also render each saved model with conf/scene/<NAME>.yaml "
                     f"('{RECORD_SCENE}': the run's own scene)")
+    ap.add_argument("--store-as", choices=("float16", "float32"), default=None,
+                    help="store each saved network at this dtype (rounding it) and mesh it anew")
     args = ap.parse_args(argv)
     try:
         checked_counts(args)
@@ -135,7 +166,7 @@ def main(argv: list[str] | None = None) -> int:
     done, failed = [], 0
     for i, rec in enumerate(sorted(recs, key=lambda r: (r["model"], r["shape"]["name"], r["key"]))):
         try:
-            done.append(reevaluated(rec, args.n_points, scene))
+            done.append(reevaluated(rec, args.n_points, scene, args.store_as))
         except (InputError, OSError, KeyError, ValueError) as err:
             failed += 1
             print(f"ddfbench.reevaluate: {rec['_dir']}: {type(err).__name__}: {str(err).splitlines()[0]}",

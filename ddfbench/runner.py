@@ -117,6 +117,11 @@ def _stages(cfg: Mapping[str, Any], rdir: str, device: str, seed: int, out: dict
     if stats.status != "ok":
         raise StageFailed(f"fit of {Family.family} failed: {stats.message}")
 
+    saved = rep.save(os.path.join(rdir, "model"))  # first: a lossy storage dtype rounds what is measured below
+    artifacts["model"] = os.path.relpath(saved, rdir)
+    cost["storage_bytes"] = int(rep.storage_bytes())
+    cost["n_params"] = int(rep.n_params())
+
     t0 = time.perf_counter()
     rec = rep.to_mesh(int(ev["mesh_resolution"]))
     cost["extract_s"] = time.perf_counter() - t0
@@ -127,10 +132,6 @@ def _stages(cfg: Mapping[str, Any], rdir: str, device: str, seed: int, out: dict
     if len(rec.faces):
         rec.export(os.path.join(rdir, "reconstruction.ply"), file_type="ply", encoding="binary")
         artifacts["reconstruction"] = "reconstruction.ply"
-    saved = rep.save(os.path.join(rdir, "model"))
-    artifacts["model"] = os.path.relpath(saved, rdir)
-    cost["storage_bytes"] = int(rep.storage_bytes())
-    cost["n_params"] = int(rep.n_params())
 
     t0 = time.perf_counter()
     out["metrics"] = geometry_metrics(shape.mesh, rec, int(ev["n_points"]), radii, seed=seed,

@@ -258,6 +258,8 @@ def test_save_load_round_trip_and_storage(fitted, tmp_path):
     half_path = half.save(str(tmp_path / "half"))
     assert half.storage_bytes() < 0.6 * rep.storage_bytes()
     c = DDF.load(half_path).intersect(o, d, normals=False)
+    live = half.intersect(o, d, normals=False)  # the saved model answers as its float16 artifact, not in float32
+    assert np.array_equal(live.t, c.t) and np.array_equal(live.hit, c.hit) and not np.array_equal(live.t, a.t)
     both = c.hit & a.hit
     assert (c.hit == a.hit).mean() > 0.99 and np.abs(c.t[both] - a.t[both]).max() < 0.01
 

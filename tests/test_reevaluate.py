@@ -69,3 +69,34 @@ def test_reevaluation_at_the_records_settings_reproduces_them(tmp_path, capsys):
     assert len(err) == 1 and gone["_dir"] in err[0] and "no model artifact" in err[0]
     assert len(pd.read_csv(tmp_path / "re_gone" / "runs.csv")) == 3
     assert main([str(tmp_path / "nothing"), "--out", str(tmp_path / "x")]) == 2
+
+
+DDF_RUN = ["-m", "model=ddf", "model.width=32", "model.depth=2", "model.storage_dtype=float32,float16", "shape=sphere",
+           "eval=smoke", "eval.n_points=2000", "eval.mesh_resolution=20", "scene=none", "sampling=random",
+           "sampling.n_samples=2000", "train.budget=steps", "train.max_steps=60", "threads=1", "quiet=true"]
+
+
+@pytest.mark.slow
+def test_a_float16_run_measures_its_rounded_network_as_store_as_float16_measures_the_float32_run(tmp_path, capsys):
+    done = subprocess.run([sys.executable, "-m", "ddfbench", *DDF_RUN, f"out_dir={tmp_path}"],
+                          capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr[-2000:]
+    runs = {r["config"]["model"]["storage_dtype"]: r for r in find_records(str(tmp_path / "single"))}
+    assert set(runs) == {"float32", "float16"} and all(r["status"] == "ok" for r in runs.values())
+    half, full = runs["float16"]["metrics"], runs["float32"]["metrics"]
+    assert half["chamfer_l2"] != full["chamfer_l2"]  # the same fit, measured after its float16 rounding
+    assert main([str(tmp_path / "single"), "--out", str(tmp_path / "re"), "--n-points", "2000",
+                 "--model", "ddf", "--store-as", "float16"]) == 0
+    again = pd.read_csv(tmp_path / "re" / "runs.csv").set_index("key")
+    for rec in runs.values():  # both records stored as float16 and meshed anew: the float16 run's numbers
+        assert again.loc[rec["key"], "chamfer_l2"] == pytest.approx(half["chamfer_l2"], rel=1e-5)
+        assert again.loc[rec["key"], "storage_bytes"] == runs["float16"]["cost"]["storage_bytes"]
+    assert runs["float16"]["cost"]["storage_bytes"] < 0.6 * runs["float32"]["cost"]["storage_bytes"]
+    grid = subprocess.run([sys.executable, "-m", "ddfbench", *RUN[:1], "model=grid_sdf", *RUN[2:],
+                           f"out_dir={tmp_path}"], capture_output=True, text=True, timeout=600)
+    assert grid.returncode == 0, grid.stderr[-2000:]
+    capsys.readouterr()
+    assert main([str(tmp_path / "single"), "--out", str(tmp_path / "g"), "--model", "grid_sdf", "--store-as",
+                 "float16"]) == 1
+    err = [line for line in capsys.readouterr().err.splitlines() if line.startswith("ddfbench.reevaluate")]
+    assert len(err) == 1 and "family grid_sdf has no storage_dtype" in err[0]

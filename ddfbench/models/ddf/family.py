@@ -196,9 +196,12 @@ class DDF(Representation):
         return int(sum(p.numel() for p in self.net.parameters()))
 
     def save(self, path: str) -> str:
-        """One file <path>.pt: the state dict in storage_dtype and a JSON header (see _save_network)."""
+        """One file <path>.pt: the state dict in storage_dtype and a JSON header (see _save_network). The live
+        network takes the stored values (float16 rounds it), so what is measured afterwards is what is shipped."""
         dtype = torch.float16 if self.cfg["storage_dtype"] == "float16" else torch.float32
-        return self._save_network(path, {k: v.detach().to("cpu", dtype) for k, v in self.net.state_dict().items()})
+        stored = {k: v.detach().to("cpu", dtype) for k, v in self.net.state_dict().items()}
+        self.net.load_state_dict(stored)  # copied into the live tensors in their own dtype and device
+        return self._save_network(path, stored)
 
     @classmethod
     def load(cls, path: str, domain: float | None = None) -> "DDF":
