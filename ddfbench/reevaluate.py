@@ -9,8 +9,9 @@ float16 storage level renders its rounded weights). A sweep whose probes needed 
 (convergence: 20k) is so compared with targets stated at the 100k points of every other experiment,
 and gets image metrics it did not render, without refitting. With --store-as, each saved network (a
 family with a storage_dtype: the DDF) is stored again at that dtype, which rounds it, and meshed anew at
-its record's mesh_resolution: what a float16 artifact of the same fit would measure, paired by seed with
-the plain run (storage_bytes follows). The records are not changed. DIR gets
+its record's mesh_resolution: what a float16 artifact of the same fit would measure (storage_bytes
+follows), and paired.md sets it against the run's saved mesh measured alike, per model and capacity
+level, each run against itself. The records are not changed. DIR gets
 table.md (its first line: the command, the records' code commits and the measuring code's) /
 table.csv (report.tables: one row per configuration, seeds pooled, empty meshes at their
 penalty, the noise floor at this point count) and runs.csv (a row per run, with its swept values). A run whose artifacts
@@ -34,7 +35,7 @@ from ddfbench.errors import InputError
 from ddfbench.geometry import BOX_HALF
 from ddfbench.metrics import geometry_metrics
 from ddfbench.models import load_family
-from ddfbench.report import tables
+from ddfbench.report import paired, tables
 from ddfbench.representation import Representation
 from ddfbench.runs import code_commits, code_sha, find_records
 
@@ -134,6 +135,7 @@ def reevaluated(rec: dict[str, Any], n_points: int, scene: dict[str, Any] | str 
         rep = _saved_model(rec)
         out["cost"] = {**out.get("cost", {}), "storage_bytes": _stored_as(rep, store_as, rec["_dir"])}
         out["config"]["model"]["storage_dtype"] = store_as
+        out["_stored_as"] = store_as
         reconstruction = rep.to_mesh(int(ev["mesh_resolution"]))
     else:
         reconstruction = _reconstruction(rec)
@@ -145,6 +147,26 @@ def reevaluated(rec: dict[str, Any], n_points: int, scene: dict[str, Any] | str 
     if scene is not None and scene.get("outputs"):
         out["metrics"].update(_image_metrics(rec, rep or _saved_model(rec), gt, scene))
     return out
+
+
+def stored_as_pairs(saved: list[dict[str, Any]], stored: list[dict[str, Any]], dtype: str) -> str:
+    """paired.md: the records measured as saved against the same runs stored as `dtype` (reevaluated's
+    store_as), each run against itself, per model and capacity level; chamfer L2 and F@0.01."""
+    def level(rec: dict[str, Any]) -> tuple[str, str]:
+        return str(rec.get("model")), str(rec["config"].get("capacity", "-"))
+
+    def setting(rec: dict[str, Any]) -> str:
+        return f"stored as {dtype}" if rec.get("_stored_as") else "as saved"
+
+    parts = [f"# Each run's saved network stored again as {dtype}, against its saved mesh", ""]
+    for model, capacity in sorted({level(r) for r in saved}):
+        group = [r for r in saved + stored if level(r) == (model, capacity)]
+        width = {(r["config"]["model"].get("width"), r["config"]["model"].get("depth")) for r in group}
+        parts.append(f"## {model} {capacity} (width, depth {sorted(width)})\n")
+        for metric in ("chamfer_l2", "fscore@0.01"):
+            rows = paired.compare_settings(group, metric, setting, "as saved", pair_key=lambda r: (r["key"],))
+            parts.append(paired.to_markdown(rows, metric, "as saved", "each run against itself, the same points"))
+    return "\n".join(parts)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -163,10 +185,13 @@ def main(argv: list[str] | None = None) -> int:
     except InputError as err:
         print(f"ddfbench.reevaluate: {err}", file=sys.stderr)
         return 2
-    done, failed = [], 0
+    done, saved, failed = [], [], 0
     for i, rec in enumerate(sorted(recs, key=lambda r: (r["model"], r["shape"]["name"], r["key"]))):
         try:
+            pair = reevaluated(rec, args.n_points, None) if args.store_as else None  # the saved mesh, same points
             done.append(reevaluated(rec, args.n_points, scene, args.store_as))
+            if pair is not None:
+                saved.append(pair)
         except (InputError, OSError, KeyError, ValueError) as err:
             failed += 1
             print(f"ddfbench.reevaluate: {rec['_dir']}: {type(err).__name__}: {str(err).splitlines()[0]}",
@@ -183,6 +208,10 @@ def main(argv: list[str] | None = None) -> int:
             fh.write(md)
         tables.to_csv(df, os.path.join(args.out, "table.csv"))
         tables.per_run(done).to_csv(os.path.join(args.out, "runs.csv"), index=False)
+        if args.store_as:
+            with open(os.path.join(args.out, "paired.md"), "w") as fh:
+                fh.write(measured_header("reevaluate", argv, "paired", done) + "\n\n"
+                         + stored_as_pairs(saved, done, args.store_as))
         print(md, end="")
     return 1 if failed else 0
 

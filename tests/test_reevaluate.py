@@ -92,6 +92,9 @@ def test_a_float16_run_measures_its_rounded_network_as_store_as_float16_measures
         assert again.loc[rec["key"], "chamfer_l2"] == pytest.approx(half["chamfer_l2"], rel=1e-5)
         assert again.loc[rec["key"], "storage_bytes"] == runs["float16"]["cost"]["storage_bytes"]
     assert runs["float16"]["cost"]["storage_bytes"] < 0.6 * runs["float32"]["cost"]["storage_bytes"]
+    pairs = (tmp_path / "re" / "paired.md").read_text()  # each run against its own saved mesh: 2 pairs
+    rows = [line.split(" | ") for line in pairs.splitlines() if line.startswith("| stored as float16 |")]
+    assert len(rows) == 2 and all(row[1] == "2" for row in rows)  # chamfer and F@0.01, 2 pairs each
     grid = subprocess.run([sys.executable, "-m", "ddfbench", *RUN[:1], "model=grid_sdf", *RUN[2:],
                            f"out_dir={tmp_path}"], capture_output=True, text=True, timeout=600)
     assert grid.returncode == 0, grid.stderr[-2000:]
