@@ -30,7 +30,9 @@ def task(cfg: DictConfig) -> str | float:
     metric of the record, for an optimizing sweeper)."""
     from ddfbench import launch, runner
     from ddfbench.report.tables import summarize, to_markdown
+    from ddfbench.worker_guard import watch_launcher
 
+    watch_launcher()  # a local_parallel worker stops with its sweep
     hc = HydraConfig.get()
     plain: dict[str, Any] = OmegaConf.to_container(cfg, resolve=True)  # type: ignore[assignment]
     plain["threads"], device = launch.job_settings(plain, hc)
