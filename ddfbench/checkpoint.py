@@ -67,42 +67,47 @@ class Checkpoint:
     def load(self, fit: str) -> dict[str, Any] | None:
         """The saved state of fit `fit` (the loop's label of what is trained), or None: no file, one that
         cannot be read, or one written by other code or for another fit (set aside, logged; the fit starts
-        over). A checkpoint of this fit by this code that an earlier load set aside is taken back."""
-        if not os.path.exists(self.path):
-            return self._take_back(fit)
+        over). A checkpoint of this fit by this code that an earlier load set aside is taken back. Never
+        raises: a file that cannot be moved is logged and the fit starts over."""
+        state = self._read() if os.path.exists(self.path) else None
+        if state is not None and state.get("tag") == self.tag and state.get("fit") == fit:
+            return state
+        try:
+            if state is not None:
+                aside = self._aside(str(state.get("fit")), str(state.get("tag")))
+                os.replace(self.path, aside)
+                log.warning("%s: written for %s by code %s, not %s by %s: set aside as %s, where a run of that "
+                            "fit by that code finds it", self.path, state.get("fit"), state.get("tag"), fit,
+                            self.tag, os.path.basename(aside))
+            mine = self._aside(fit, self.tag)
+            if os.path.exists(mine):
+                os.replace(mine, self.path)
+                state = self._read()
+                if state is not None and state.get("tag") == self.tag and state.get("fit") == fit:
+                    log.warning("%s: taken back from %s", self.path, os.path.basename(mine))
+                    return state
+        except OSError as exc:  # a read-only results folder, or another process moved the file first
+            log.warning("%s: checkpoint not moved (%s)", self.path, exc)
+        if os.path.exists(self.path) or state is not None:
+            log.warning("%s: no checkpoint of %s by %s: the fit starts over", self.path, fit, self.tag)
+        return None
+
+    def _read(self) -> dict[str, Any] | None:
+        """The file at self.path as a state dict of this format, or None (logged) when it is not one."""
         try:  # tensors, numbers, strings and containers only: a results folder may come from someone else
             state = torch.load(self.path, map_location="cpu", weights_only=True)
         except Exception as exc:  # truncated, corrupt or holding other objects: start over rather than fail the run
-            log.warning("%s: unreadable, or of an older format (%s): the fit starts over", self.path, exc)
+            log.warning("%s: unreadable, or of an older format (%s)", self.path, exc)
             return None
         if not isinstance(state, dict) or state.get("format") != FORMAT:
-            log.warning("%s: of an older format: the fit starts over", self.path)
+            log.warning("%s: of an older format", self.path)
             return None
-        if state.get("tag") == self.tag and state.get("fit") == fit:
-            return state
-        aside = self._aside(str(state.get("fit")), str(state.get("tag")))
-        os.replace(self.path, aside)
-        log.warning("%s: written for %s by code %s, not %s by %s: set aside as %s, where a run of that fit by "
-                    "that code finds it", self.path, state.get("fit"), state.get("tag"), fit, self.tag,
-                    os.path.basename(aside))
-        resumed = self._take_back(fit)
-        if resumed is None:
-            log.warning("%s: no checkpoint of %s by %s: the fit starts over", self.path, fit, self.tag)
-        return resumed
+        return state
 
     def _aside(self, fit: str, tag: str) -> str:
         """Where a checkpoint of fit `fit` by code `tag` waits while another fit uses self.path."""
         digest = hashlib.sha256("\n".join((fit, tag)).encode()).hexdigest()[:12]
         return f"{self.path}.{digest}.pt"
-
-    def _take_back(self, fit: str) -> dict[str, Any] | None:
-        """The set-aside checkpoint of fit `fit` by this code, moved back to self.path and loaded, or None."""
-        aside = self._aside(fit, self.tag)
-        if not os.path.exists(aside):
-            return None
-        os.replace(aside, self.path)
-        log.warning("%s: taken back from %s", self.path, os.path.basename(aside))
-        return self.load(fit)
 
     def remove(self) -> None:
         """Delete the checkpoint, those set aside and any temporary file a killed save left."""

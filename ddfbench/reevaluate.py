@@ -11,7 +11,8 @@ and gets image metrics it did not render, without refitting. With --store-as, ea
 family with a storage_dtype: the DDF) is stored again at that dtype, which rounds it, and meshed anew at
 its record's mesh_resolution: what a float16 artifact of the same fit would measure (storage_bytes
 follows), and paired.md sets it against the run's saved mesh measured alike, per model and capacity
-level, each run against itself. The records are not changed. DIR gets
+level, each run against itself (the saved mesh is the record's code's and device's: pair within one
+code of the mesh extraction). The records are not changed. DIR gets
 table.md (its first line: the command, the records' code commits and the measuring code's) /
 table.csv (report.tables: one row per configuration, seeds pooled, empty meshes at their
 penalty, the noise floor at this point count) and runs.csv (a row per run, with its swept values). A run whose artifacts
@@ -58,16 +59,24 @@ def _reconstruction(rec: dict[str, Any]) -> trimesh.Trimesh:
     return trimesh.load(artifact(rec, "reconstruction"), force="mesh", process=False)
 
 
-def _saved_model(rec: dict[str, Any]) -> Representation:
+def saved_model(rec: dict[str, Any]) -> Representation:
     """The run's saved model, loaded for the record's field box."""
     return load_family(rec["family"]).load(artifact(rec, "model"), domain=float(rec["config"].get("domain", BOX_HALF)))
 
 
-def _stored_as(rep: Representation, dtype: str, where: str) -> int:
+def _check_store_as(rec: dict[str, Any], dtype: str) -> None:
+    """InputError naming the run folder unless its family has a storage_dtype no narrower than `dtype`
+    (a float16 record stored as float32 would not measure a float32 artifact)."""
+    stored = (rec["config"].get("model") or {}).get("storage_dtype")
+    if stored is None:
+        raise InputError(f"{rec['_dir']}: family {rec['family']} has no storage_dtype to store it as {dtype}")
+    if (stored, dtype) == ("float16", "float32"):
+        raise InputError(f"{rec['_dir']}: stored as float16 already; storing it as float32 cannot undo the rounding")
+
+
+def _stored_as(rep: Representation, dtype: str) -> int:
     """Save `rep` again (into a temporary folder) with storage_dtype `dtype`, which rounds it as a user's
-    artifact of that dtype would be; the file's bytes. InputError naming `where` for a family without one."""
-    if "storage_dtype" not in rep.cfg:
-        raise InputError(f"{where}: family {rep.family} has no storage_dtype to store it as {dtype}")
+    artifact of that dtype would be; the file's bytes."""
     rep.cfg["storage_dtype"] = dtype
     with tempfile.TemporaryDirectory(prefix="ddfbench-store-") as tmp:
         rep.save(os.path.join(tmp, "model"))
@@ -79,7 +88,7 @@ def _image_metrics(rec: dict[str, Any], rep: Representation, gt: trimesh.Trimesh
     """The run's model `rep` rendered with `scene` against the GT mesh (render.render_scene's image metrics)."""
     from ddfbench.render import mesh_reference, render_scene  # the renderer's imports are only needed with a scene
 
-    domain = float(rec["config"].get("domain", BOX_HALF))
+    domain = rep.domain
     once = {**scene, "timing": {**(scene.get("timing") or {}), "repeats": 1, "warmup": 0}}
     with tempfile.TemporaryDirectory(prefix="ddfbench-reeval-") as tmp:
         seed = int(rec["config"].get("seed", 0))
@@ -132,8 +141,9 @@ def reevaluated(rec: dict[str, Any], n_points: int, scene: dict[str, Any] | str 
     out = copy.deepcopy(rec)
     rep, reconstruction = None, None
     if store_as is not None:
-        rep = _saved_model(rec)
-        out["cost"] = {**out.get("cost", {}), "storage_bytes": _stored_as(rep, store_as, rec["_dir"])}
+        _check_store_as(rec, store_as)
+        rep = saved_model(rec)
+        out["cost"] = {**out.get("cost", {}), "storage_bytes": _stored_as(rep, store_as)}
         out["config"]["model"]["storage_dtype"] = store_as
         out["_stored_as"] = store_as
         reconstruction = rep.to_mesh(int(ev["mesh_resolution"]))
@@ -145,7 +155,7 @@ def reevaluated(rec: dict[str, Any], n_points: int, scene: dict[str, Any] | str 
     if scene == RECORD_SCENE:
         scene = dict(cfg.get("scene") or {})
     if scene is not None and scene.get("outputs"):
-        out["metrics"].update(_image_metrics(rec, rep or _saved_model(rec), gt, scene))
+        out["metrics"].update(_image_metrics(rec, rep or saved_model(rec), gt, scene))
     return out
 
 
@@ -188,8 +198,9 @@ def main(argv: list[str] | None = None) -> int:
     done, saved, failed = [], [], 0
     for i, rec in enumerate(sorted(recs, key=lambda r: (r["model"], r["shape"]["name"], r["key"]))):
         try:
+            measured = reevaluated(rec, args.n_points, scene, args.store_as)
             pair = reevaluated(rec, args.n_points, None) if args.store_as else None  # the saved mesh, same points
-            done.append(reevaluated(rec, args.n_points, scene, args.store_as))
+            done.append(measured)
             if pair is not None:
                 saved.append(pair)
         except (InputError, OSError, KeyError, ValueError) as err:

@@ -149,9 +149,9 @@ class Representation(abc.ABC):
 
     @abc.abstractmethod
     def save(self, path: str) -> str:
-        """Write the artifact a user would ship; return the path written. Afterwards the representation
-        answers as the artifact does (a lossy storage dtype rounds the live one too): the runner saves before
-        it meshes and renders, so a record measures what it ships."""
+        """Write the artifact a user would ship; return the path written. A family with a lossy storage_dtype
+        rounds the live representation to what it stored: the runner saves before it meshes and renders, so
+        a record measures what it ships."""
 
     @classmethod
     @abc.abstractmethod

@@ -38,11 +38,11 @@ import torch
 import trimesh
 
 from ddfbench.errors import InputError
-from ddfbench.geometry import BOX_HALF
 from ddfbench.metrics import geometry_metrics, sample_surface
 from ddfbench.models import load_family
 from ddfbench.models._sdf_family import SDFFamily
-from ddfbench.reevaluate import artifact, checked_counts, finished_records, measured_header, records_parser
+from ddfbench.reevaluate import (artifact, checked_counts, finished_records, measured_header, records_parser,
+                                 saved_model)
 
 PERCENTILES = (5, 25, 50, 75, 95)
 GRAD_BATCH = 1024  # points per backward pass (the GAN generator's graph is ~35k floats a point)
@@ -81,7 +81,7 @@ def zero_level_row(rec: dict[str, Any], n_points: int) -> dict[str, Any]:
     """One SDF run's row: its zero level's offsets on the GT surface, and its metrics at level 0 (the record's
     and recomputed) and at the median value."""
     cfg, ev = rec["config"], rec["config"].get("eval") or {}
-    rep = load_family(rec["family"]).load(artifact(rec, "model"), domain=float(cfg.get("domain", BOX_HALF)))
+    rep = saved_model(rec)
     gt = trimesh.load(artifact(rec, "gt_mesh"), force="mesh", process=False)
     seed = int(cfg.get("seed", 0))
     value, slope = value_and_slope(rep, sample_surface(gt, n_points, seed)[0])

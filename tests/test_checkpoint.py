@@ -141,8 +141,23 @@ def test_a_checkpoint_of_another_fit_is_set_aside_not_overwritten_and_its_own_fi
     newer = Checkpoint(str(tmp_path / "fit.pt"), tag="code-b")
     assert newer.load("gan 2 threads") is None  # other code does not resume either fit
     assert len(list(tmp_path.glob("fit.pt.*.pt"))) == 2
+    (tmp_path / "fit.pt").write_bytes(b"cut short")  # an unreadable file does not hide a set-aside one
+    assert two.load("gan 2 threads")["step"] == 24787
     one.remove()  # an ok record: every checkpoint of the run goes
     assert not list(tmp_path.iterdir())
+
+
+def test_a_checkpoint_that_cannot_be_moved_aside_starts_the_fit_over_without_an_error(tmp_path, monkeypatch):
+    ckpt = Checkpoint(str(tmp_path / "fit.pt"), tag="code-a")
+    ckpt.save({"fit": "gan 2 threads", "step": 7})
+
+    def read_only(*args):
+        raise PermissionError("read-only file system")
+
+    monkeypatch.setattr(os, "replace", read_only)
+    assert ckpt.load("gan 1 thread") is None  # the fit starts over; its run does not fail
+    monkeypatch.undo()
+    assert ckpt.load("gan 2 threads")["step"] == 7
 
 
 class Stranger:

@@ -95,6 +95,10 @@ def test_a_float16_run_measures_its_rounded_network_as_store_as_float16_measures
     pairs = (tmp_path / "re" / "paired.md").read_text()  # each run against its own saved mesh: 2 pairs
     rows = [line.split(" | ") for line in pairs.splitlines() if line.startswith("| stored as float16 |")]
     assert len(rows) == 2 and all(row[1] == "2" for row in rows)  # chamfer and F@0.01, 2 pairs each
+    capsys.readouterr()  # a float16 record cannot be stored as float32: its rounding stays
+    assert main([str(tmp_path / "single"), "--out", str(tmp_path / "w"), "--model", "ddf", "--store-as", "float32"]) == 1
+    err = [line for line in capsys.readouterr().err.splitlines() if line.startswith("ddfbench.reevaluate")]
+    assert len(err) == 1 and runs["float16"]["_dir"] in err[0] and "stored as float16 already" in err[0]
     grid = subprocess.run([sys.executable, "-m", "ddfbench", *RUN[:1], "model=grid_sdf", *RUN[2:],
                            f"out_dir={tmp_path}"], capture_output=True, text=True, timeout=600)
     assert grid.returncode == 0, grid.stderr[-2000:]
