@@ -54,6 +54,9 @@ def test_flipped_faces_reported():
     shape = hard_shape("hard/dirty_sphere", **{**DEFECTS, "zero_area": 0, "duplicate": 0, "unreferenced": 0})
     text = " ".join(shape.warnings)
     assert ("wound" in text or "winding" in text or "flipped" in text) and "5" in text, shape.warnings
+    raw = dirty_sphere(**{**DEFECTS, "zero_area": 0, "duplicate": 0, "unreferenced": 0})
+    assert not raw.is_winding_consistent  # the 5 flipped faces are there before validation ...
+    assert shape.mesh.is_winding_consistent and shape.mesh.volume > 0  # ... and re-wound outward after it
 
 
 def test_warnings_reach_the_record_summary():
