@@ -134,19 +134,21 @@ COLUMNS = (("pixels_near", "pixels ≤ 2 px of an edge %", 100), ("mask_errors_n
 
 
 def to_markdown(runs: pd.DataFrame) -> str:
-    """One row per model, shape and capacity: each figure's mean ± std over the runs (seeds), n."""
+    """One row per model, shape and capacity: each figure's mean ± std [95 % t interval] over the runs (seeds), n."""
     lines = ["| model | shape | capacity | n | " + " | ".join(title for _, title, _ in COLUMNS) + " |",
              "|---" * (4 + len(COLUMNS)) + "|"]
     for (model, shape, capacity), group in runs.groupby(["model", "shape", "capacity"], sort=True):
         cells = []
         for key, _, scale in COLUMNS:
             s = summarize_values(group[key])
-            cells.append("–" if s.n == 0 else f"{s.mean * scale:.3g}" + (f" ± {s.std * scale:.2g}" if s.n > 1 else ""))
+            cells.append("–" if s.n == 0 else f"{s.mean * scale:.3g}" + (f" ± {s.std * scale:.2g} [{s.lo * scale:.3g}, "
+                                                                         f"{s.hi * scale:.3g}]" if s.n > 1 else ""))
         lines.append(f"| {model} | {shape} | {capacity} | {len(group)} | " + " | ".join(cells) + " |")
     lines += ["", "An edge pixel is one of the oracle's frame where the hit mask changes or the depth jumps (module "
               "docstring of ddfbench/edge_error.py); '≤ 2 px': within 2 pixels of one. 'mask errors': pixels exactly one "
               "render hits; 'summed depth error': Σ|t − t_ref| over the pixels both hit. depth MAE and mask IoU over all "
-              "pixels are the record's own image metrics, computed again (a control). Mean ± std over seeds."]
+              "pixels are the record's own image metrics, computed again (a control). Mean ± std [95 % t interval of the "
+              "mean] over seeds."]
     return "\n".join(lines) + "\n"
 
 
