@@ -80,6 +80,7 @@ def band_counts(depth: np.ndarray, mask: np.ndarray, ref_depth: np.ndarray, ref_
 
 
 def _frame(folder: str, camera: int, reference: bool) -> tuple[np.ndarray, np.ndarray]:
+    """(depth (H, W) float32, inf on background; mask (H, W) bool) of one camera, the oracle's if `reference`."""
     suffix = "_reference" if reference else ""
     depth, mask = (os.path.join(folder, f"cam{camera}_{what}{suffix}.npy") for what in ("depth", "mask"))
     for path in (depth, mask):
@@ -107,8 +108,9 @@ def _ratio(num: float, den: float) -> float:
 
 
 def figures(counts: dict[str, np.ndarray]) -> dict[str, float]:
-    """A run's summary: the share of pixels, of mask errors and of summed depth error within 2 px of an
-    edge, the depth MAE there, beyond 4 px and overall, and the mask IoU."""
+    """A run's summary from its band counts: the shares (0-1) of pixels, of mask errors and of summed depth
+    error within 2 px of an edge; the depth MAE (unit-cube units) there, beyond 4 px and overall (NaN where
+    no pixel of that set is hit by both); the mask IoU (1 where neither render hits)."""
     near = [i for i, (name, _) in enumerate(BANDS) if name in NEAR]
     far = len(BANDS) - 1
     total = {k: float(v.sum()) for k, v in counts.items()}
@@ -123,8 +125,11 @@ def figures(counts: dict[str, np.ndarray]) -> dict[str, float]:
     }
 
 
-def _label(rec: dict[str, Any]) -> tuple[str, str, str]:
-    return str(rec["model"]), str(rec["shape"]["name"]), str(rec["config"].get("capacity") or "–")
+def _label(rec: dict[str, Any]) -> tuple[str, str, str, int]:
+    """model, shape, capacity level ("–" without one) and seed of a record."""
+    cfg = rec.get("config") or {}
+    return (str(rec.get("model")), str((rec.get("shape") or {}).get("name")), str(cfg.get("capacity") or "–"),
+            int(cfg.get("seed", 0)))
 
 
 COLUMNS = (("pixels_near", "pixels ≤ 2 px of an edge %", 100), ("mask_errors_near", "mask errors ≤ 2 px %", 100),
@@ -133,22 +138,30 @@ COLUMNS = (("pixels_near", "pixels ≤ 2 px of an edge %", 100), ("mask_errors_n
            ("mask_iou", "mask IoU", 1))
 
 
+def _cell(values: pd.Series, scale: float, runs: int) -> str:
+    """mean ± std [95 % t interval] of the finite values, scaled; "(n = k)" where k < runs are finite."""
+    s = summarize_values(values)
+    if s.n == 0:
+        return "–"
+    text = f"{s.mean * scale:.3g}"
+    if s.n > 1:
+        std = s.std if s.std > 1e-9 * abs(s.mean) else 0.0  # float noise of identical runs prints as 0
+        text += f" ± {std * scale:.2g} [{s.lo * scale:.3g}, {s.hi * scale:.3g}]"
+    return text + (f" (n = {s.n})" if s.n < runs else "")
+
+
 def to_markdown(runs: pd.DataFrame) -> str:
     """One row per model, shape and capacity: each figure's mean ± std [95 % t interval] over the runs (seeds), n."""
     lines = ["| model | shape | capacity | n | " + " | ".join(title for _, title, _ in COLUMNS) + " |",
              "|---" * (4 + len(COLUMNS)) + "|"]
     for (model, shape, capacity), group in runs.groupby(["model", "shape", "capacity"], sort=True):
-        cells = []
-        for key, _, scale in COLUMNS:
-            s = summarize_values(group[key])
-            cells.append("–" if s.n == 0 else f"{s.mean * scale:.3g}" + (f" ± {s.std * scale:.2g} [{s.lo * scale:.3g}, "
-                                                                         f"{s.hi * scale:.3g}]" if s.n > 1 else ""))
+        cells = [_cell(group[key], scale, len(group)) for key, _, scale in COLUMNS]
         lines.append(f"| {model} | {shape} | {capacity} | {len(group)} | " + " | ".join(cells) + " |")
     lines += ["", "An edge pixel is one of the oracle's frame where the hit mask changes or the depth jumps (module "
               "docstring of ddfbench/edge_error.py); '≤ 2 px': within 2 pixels of one. 'mask errors': pixels exactly one "
               "render hits; 'summed depth error': Σ|t − t_ref| over the pixels both hit. depth MAE and mask IoU over all "
               "pixels are the record's own image metrics, computed again (a control). Mean ± std [95 % t interval of the "
-              "mean] over seeds."]
+              "mean] over seeds; '(n = k)': only k of the row's runs define the figure (the others hit no such pixel)."]
     return "\n".join(lines) + "\n"
 
 
@@ -168,7 +181,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"ddfbench.edge_error: {err}", file=sys.stderr)
         return 2
     rows, used, failed = [], [], 0
-    for rec in sorted(recs, key=lambda r: (*_label(r), int(r["config"].get("seed", 0)), r["key"])):
+    for rec in sorted(recs, key=lambda r: (*_label(r), str(r.get("key")))):
         try:
             counts = run_counts(rec, args.jump)
         except (InputError, OSError, ValueError) as err:
@@ -177,11 +190,11 @@ def main(argv: list[str] | None = None) -> int:
                   file=sys.stderr, flush=True)
             continue
         used.append(rec)
-        model, shape, capacity = _label(rec)
-        run = {"model": model, "shape": shape, "capacity": capacity, "seed": int(rec["config"].get("seed", 0)),
-               "key": rec["key"], **figures(counts)}
+        run = {**dict(zip(("model", "shape", "capacity", "seed"), _label(rec))), "key": rec["key"], **figures(counts)}
         rows += [{**run, "band": name, **{k: float(counts[k][i]) for k in COUNTS}} for i, (name, _) in enumerate(BANDS)]
     if not rows:
+        print(f"ddfbench.edge_error: none of the {len(recs)} finished runs has readable renders; nothing written",
+              file=sys.stderr)
         return 1
     os.makedirs(args.out, exist_ok=True)
     table = pd.DataFrame(rows)

@@ -46,6 +46,10 @@ def test_bands_follow_the_distance_to_the_nearest_edge_and_a_frame_without_edges
     edges = np.zeros((1, 9), bool)
     edges[0, 0] = True
     assert list(bands(edges)[0]) == [BAND["edge"], *[BAND["near"]] * 2, *[BAND["mid"]] * 2, *[BAND["far"]] * 4]
+    corner = np.zeros((5, 5), bool)
+    corner[0, 0] = True
+    band = bands(corner)  # Euclidean: (3, 2) is 3.61 px away (city block: 5, far); (3, 3) 4.24 px (chessboard: 3, mid)
+    assert band[1, 1] == BAND["near"] and band[3, 2] == BAND["mid"] and band[3, 3] == BAND["far"]
     assert (bands(np.zeros((4, 4), bool)) == BAND["far"]).all()
 
 
@@ -57,16 +61,19 @@ def test_errors_land_in_the_band_of_their_pixels_and_the_figures_pool_them():
     depth[2, 10] += 0.01  # on the rim
     mask[1, 10], depth[1, 10] = True, 1.0  # one pixel hit outside the square: a mask error on the edge ring
     counts = band_counts(depth, mask, ref_depth, ref_mask, jump=0.1)
-    assert counts["pixels"].sum() == 16 * 16 + 1 and counts["both"].sum() == 16 * 16
+    # inside the square the rings 1, 2, 3 ... from its rim lie 0, 1, 2 ... px from the nearest edge pixel (the rim)
+    assert list(counts["pixels"]) == [60 + 1, 52 + 44, 36 + 28, 36]
+    assert list(counts["both"]) == [60, 52 + 44, 36 + 28, 36]
     assert counts["mask_errors"][BAND["edge"]] == 1 and counts["mask_errors"].sum() == 1
     assert counts["abs_depth"][BAND["far"]] == pytest.approx(0.04, rel=1e-5)
     assert counts["abs_depth"][BAND["edge"]] == pytest.approx(0.01, rel=1e-4)
     fig = figures(counts)
-    assert fig["mask_errors_near"] == 1.0
+    assert fig["pixels_near"] == pytest.approx(157 / 257) and fig["mask_errors_near"] == 1.0
+    assert fig["depth_mae_near"] == pytest.approx(0.01 / 156, rel=1e-4)
     assert fig["abs_depth_near"] == pytest.approx(0.01 / 0.05, rel=1e-4)
     assert fig["depth_mae"] == pytest.approx(0.05 / 256, rel=1e-4)
     assert fig["mask_iou"] == pytest.approx(256 / 257)
-    assert fig["depth_mae_far"] == pytest.approx(0.04 / counts["both"][BAND["far"]], rel=1e-5)
+    assert fig["depth_mae_far"] == pytest.approx(0.04 / 36, rel=1e-5)
 
 
 def test_a_frame_pair_without_overlap_has_no_depth_figures():
@@ -74,6 +81,8 @@ def test_a_frame_pair_without_overlap_has_no_depth_figures():
     empty = np.zeros_like(ref_mask)
     fig = figures(band_counts(np.full(ref_depth.shape, np.inf, np.float32), empty, ref_depth, ref_mask, jump=0.1))
     assert math.isnan(fig["depth_mae"]) and math.isnan(fig["depth_mae_far"]) and fig["mask_iou"] == 0.0
+    nothing = np.full(ref_depth.shape, np.inf, np.float32)
+    assert figures(band_counts(nothing, empty, nothing, empty, jump=0.1))["mask_iou"] == 1.0
 
 
 RUN = ["model=grid_sdf", "model.resolution=24", "shape=sphere", "eval=smoke", "eval.n_points=2000",
@@ -113,3 +122,16 @@ def test_a_bad_jump_and_a_folder_without_records_are_one_line_errors(tmp_path, c
     err = capsys.readouterr().err.splitlines()
     assert err[0].startswith("ddfbench.edge_error: --jump 0") and "no finished run records" in err[1]
     assert not (tmp_path / "o").exists()
+
+
+def test_the_table_pools_seeds_and_says_where_fewer_runs_define_a_figure():
+    from ddfbench.edge_error import COLUMNS, to_markdown
+
+    run = {key: 0.5 for key, _, _ in COLUMNS}
+    runs = pd.DataFrame([{"model": "m", "shape": "s", "capacity": "c1", **run, "depth_mae_far": math.nan},
+                         {"model": "m", "shape": "s", "capacity": "c1", **run, "depth_mae_far": 0.002}])
+    row = next(line for line in to_markdown(runs).splitlines() if line.startswith("| m |"))
+    cells = [c.strip() for c in row.strip("|").split("|")]
+    assert cells[3] == "2"  # n: the runs of the row
+    assert cells[4] == "50 ± 0 [50, 50]"  # two identical runs: no spread
+    assert cells[4 + [key for key, _, _ in COLUMNS].index("depth_mae_far")] == "2 (n = 1)"
