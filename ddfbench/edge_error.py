@@ -35,7 +35,7 @@ import pandas as pd
 from scipy import ndimage
 
 from ddfbench.errors import InputError
-from ddfbench.reevaluate import artifact, finished_records, measured_header
+from ddfbench.reevaluate import artifact, finished_records, measured_header, unreadable
 from ddfbench.report.stats import summarize_values
 
 BANDS = (("edge", 0.0), ("near", 2.0), ("mid", 4.0), ("far", math.inf))  # name, largest distance (px)
@@ -186,8 +186,7 @@ def main(argv: list[str] | None = None) -> int:
             counts = run_counts(rec, args.jump)
         except (InputError, OSError, ValueError) as err:
             failed += 1
-            print(f"ddfbench.edge_error: {rec['_dir']}: {type(err).__name__}: {str(err).splitlines()[0]}",
-                  file=sys.stderr, flush=True)
+            unreadable("edge_error", rec, err)
             continue
         used.append(rec)
         run = {**dict(zip(("model", "shape", "capacity", "seed"), _label(rec))), "key": rec["key"], **figures(counts)}

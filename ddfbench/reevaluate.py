@@ -124,6 +124,12 @@ def finished_records(results: str, models: list[str] | None) -> list[dict[str, A
     return recs
 
 
+def unreadable(tool: str, rec: dict[str, Any], err: Exception) -> None:
+    """One line on stderr naming the run folder whose artifacts `tool` could not measure, and why."""
+    why = (str(err).splitlines() or [""])[0]
+    print(f"ddfbench.{tool}: {rec['_dir']}: {type(err).__name__}: {why}", file=sys.stderr, flush=True)
+
+
 def measured_header(tool: str, argv: list[str] | None, measured: str, records: list[dict[str, Any]]) -> str:
     """A table's first line: the command, what was measured, the records' code commits and the measuring code's."""
     command = f"`python -m ddfbench.{tool} {' '.join(argv if argv is not None else sys.argv[1:])}`"
@@ -205,8 +211,7 @@ def main(argv: list[str] | None = None) -> int:
                 saved.append(pair)
         except (InputError, OSError, KeyError, ValueError) as err:
             failed += 1
-            print(f"ddfbench.reevaluate: {rec['_dir']}: {type(err).__name__}: {str(err).splitlines()[0]}",
-                  file=sys.stderr, flush=True)
+            unreadable("reevaluate", rec, err)
             continue
         print(f"[{i + 1}/{len(recs)}] {rec['model']} {rec['shape']['name']} seed {rec['config'].get('seed')}: "
               f"CD-L2 {done[-1]['metrics']['chamfer_l2']:.4g}", file=sys.stderr, flush=True)

@@ -42,7 +42,7 @@ from ddfbench.metrics import geometry_metrics, sample_surface
 from ddfbench.models import load_family
 from ddfbench.models._sdf_family import SDFFamily
 from ddfbench.reevaluate import (artifact, checked_counts, finished_records, measured_header, records_parser,
-                                 saved_model)
+                                 saved_model, unreadable)
 
 PERCENTILES = (5, 25, 50, 75, 95)
 GRAD_BATCH = 1024  # points per backward pass (the GAN generator's graph is ~35k floats a point)
@@ -148,8 +148,7 @@ def main(argv: list[str] | None = None) -> int:
             rows.append(zero_level_row(rec, args.n_points))
         except (InputError, OSError, KeyError, ValueError, RuntimeError) as err:
             failed += 1
-            print(f"ddfbench.zero_level: {rec['_dir']}: {type(err).__name__}: {str(err).splitlines()[0]}",
-                  file=sys.stderr, flush=True)
+            unreadable("zero_level", rec, err)
     if rows:
         os.makedirs(args.out, exist_ok=True)
         used = [r for r in sdf_recs if r["key"] in {row["key"] for row in rows}]
