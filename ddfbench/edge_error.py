@@ -36,7 +36,9 @@ from scipy import ndimage
 
 from ddfbench.errors import InputError
 from ddfbench.reevaluate import artifact, finished_records, measured_header, unreadable
+from ddfbench.report.records import no_result
 from ddfbench.report.stats import summarize_values
+from ddfbench.report.tables import NOT_CONVERGED
 
 BANDS = (("edge", 0.0), ("near", 2.0), ("mid", 4.0), ("far", math.inf))  # name, largest distance (px)
 NEAR = ("edge", "near")  # the bands within 2 px of an edge
@@ -156,12 +158,14 @@ def to_markdown(runs: pd.DataFrame) -> str:
              "|---" * (4 + len(COLUMNS)) + "|"]
     for (model, shape, capacity), group in runs.groupby(["model", "shape", "capacity"], sort=True):
         cells = [_cell(group[key], scale, len(group)) for key, _, scale in COLUMNS]
-        lines.append(f"| {model} | {shape} | {capacity} | {len(group)} | " + " | ".join(cells) + " |")
+        n = f"{len(group)} {NOT_CONVERGED}" if group["no_result"].all() else str(len(group))
+        lines.append(f"| {model} | {shape} | {capacity} | {n} | " + " | ".join(cells) + " |")
     lines += ["", "An edge pixel is one of the oracle's frame where the hit mask changes or the depth jumps (module "
               "docstring of ddfbench/edge_error.py); '≤ 2 px': within 2 pixels of one. 'mask errors': pixels exactly one "
               "render hits; 'summed depth error': Σ|t − t_ref| over the pixels both hit. depth MAE and mask IoU over all "
               "pixels are the record's own image metrics, computed again (a control). Mean ± std [95 % t interval of the "
-              "mean] over seeds; '(n = k)': only k of the row's runs define the figure (the others hit no such pixel)."]
+              "mean] over seeds; '(n = k)': only k of the row's runs define the figure (the others hit no such pixel); "
+              f"'{NOT_CONVERGED}': every run's mesh was empty or off the shape, not a method result."]
     return "\n".join(lines) + "\n"
 
 
@@ -189,7 +193,8 @@ def main(argv: list[str] | None = None) -> int:
             unreadable("edge_error", rec, err)
             continue
         used.append(rec)
-        run = {**dict(zip(("model", "shape", "capacity", "seed"), _label(rec))), "key": rec["key"], **figures(counts)}
+        run = {**dict(zip(("model", "shape", "capacity", "seed"), _label(rec))), "key": rec["key"],
+               "no_result": no_result(rec), **figures(counts)}
         rows += [{**run, "band": name, **{k: float(counts[k][i]) for k in COUNTS}} for i, (name, _) in enumerate(BANDS)]
     if not rows:
         print(f"ddfbench.edge_error: none of the {len(recs)} finished runs has readable renders; nothing written",

@@ -128,9 +128,12 @@ def test_the_table_pools_seeds_and_says_where_fewer_runs_define_a_figure():
     from ddfbench.edge_error import COLUMNS, to_markdown
 
     run = {key: 0.5 for key, _, _ in COLUMNS}
-    runs = pd.DataFrame([{"model": "m", "shape": "s", "capacity": "c1", **run, "depth_mae_far": math.nan},
-                         {"model": "m", "shape": "s", "capacity": "c1", **run, "depth_mae_far": 0.002}])
-    row = next(line for line in to_markdown(runs).splitlines() if line.startswith("| m |"))
+    runs = pd.DataFrame([{"model": "m", "shape": "s", "capacity": "c1", **run, "depth_mae_far": math.nan, "no_result": False},
+                         {"model": "m", "shape": "s", "capacity": "c1", **run, "depth_mae_far": 0.002, "no_result": False},
+                         {"model": "m", "shape": "s", "capacity": "c2", **run, "no_result": True}])
+    table = to_markdown(runs).splitlines()
+    assert next(line for line in table if line.startswith("| m | s | c2 |")).split("|")[4].strip() == "1 not converged"
+    row = next(line for line in table if line.startswith("| m | s | c1 |"))
     cells = [c.strip() for c in row.strip("|").split("|")]
     assert cells[3] == "2"  # n: the runs of the row
     assert cells[4] == "50 ± 0 [50, 50]"  # two identical runs: no spread
