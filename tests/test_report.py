@@ -278,6 +278,21 @@ def test_report_command_writes_parseable_files(tmp_path):
     assert report_main([str(tmp_path / "missing")]) == 2
 
 
+def test_report_keeps_each_runs_values_in_runs_csv(tmp_path):
+    recs = [make_record(seed=s, chamfer=c) for s, c in ((0, 1e-3), (1, 4e-3), (2, 2.5e-3))]
+    recs.append(make_record(seed=3, status="failed"))
+    for r in recs:
+        write_json_atomic(str(tmp_path / "rec" / r["key"] / "record.json"), r)
+    assert report_main([str(tmp_path / "rec"), "--out", str(tmp_path / "rep"), "--plots", "none"]) == 0
+    runs = pd.read_csv(tmp_path / "rep" / "runs.csv")
+    assert sorted(runs["key"]) == sorted(r["key"] for r in recs)
+    ok = runs[runs["status"] == "ok"].set_index("seed")["chamfer_l2"]
+    assert ok.to_dict() == pytest.approx({0: 1e-3, 1: 4e-3, 2: 2.5e-3})
+    assert runs.loc[runs["seed"] == 3, "status"].item() == "failed"
+    table = pd.read_csv(tmp_path / "rep" / "table.csv")
+    assert table.loc[table["model"] == "ddf", "chamfer_l2_mean"].item() == pytest.approx(2.5e-3)
+
+
 def test_every_experiment_has_a_plot_selection():
     import os
 

@@ -2,6 +2,8 @@
 
 Writes, from the run records below the folder:
   table.md, table.csv, table.tex   one row per configuration (ddfbench.report.tables)
+  runs.csv                         one row per run record (tables.per_run): its key, seed and every metric,
+                                   so a report keeps each seed's values after the records are gone
   <kind>.png, <kind>.pdf           the experiment's plots (ddfbench.report.plots: PLOTS_BY_EXPERIMENT)
   gallery.png                      renders beside the oracle's, error maps, meshes (ddfbench.report.gallery)
   report.md                        the note, the sweep's status (runs done / failed / missing), the
@@ -35,7 +37,7 @@ from ddfbench.report import convergence
 from ddfbench.report.gallery import write_gallery
 from ddfbench.report.paired import paired_report
 from ddfbench.report.plots import PLOTS, plots_for, write_plots
-from ddfbench.report.tables import summarize, to_csv, to_latex, to_markdown
+from ddfbench.report.tables import per_run, summarize, to_csv, to_latex, to_markdown
 from ddfbench.runs import code_commits, find_records
 
 
@@ -124,6 +126,7 @@ def write_report(records_dir: str, out_dir: str, note: str | None = None,
     with open(os.path.join(out_dir, "table.tex"), "w") as fh:
         fh.write(to_latex(df))
     to_csv(df, os.path.join(out_dir, "table.csv"))
+    per_run(records).to_csv(os.path.join(out_dir, "runs.csv"), index=False)
     experiment = _experiment(records, records_dir)
     kind = _experiment_file(records, experiment)
     written = write_plots(records, out_dir, kinds if kinds is not None else plots_for(kind))
@@ -220,7 +223,7 @@ def main(argv: list[str] | None = None) -> int:
     except MixedCommits as exc:
         print(f"ddfbench.report: {exc}", file=sys.stderr)
         return 2
-    print(f"wrote {out}/report.md, table.md, table.csv, table.tex and plots")
+    print(f"wrote {out}/report.md, table.md, table.csv, runs.csv, table.tex and plots")
     return 0
 
 
