@@ -42,7 +42,7 @@ def main() -> None:
     seed2 = seed2[(seed2["model"] == "gan_sdf_tuned") & (seed2["status"] == "ok")].iloc[0]
     assert int(seed2["seed"]) == 2, "seed2/runs.csv must hold seed 2"
     print("# gan_sdf_tuned at 40 epochs on the bunny: seeds 0-2 pooled (pool_seeds.py; code 332b432)\n")
-    print("| metric | mean ± std [95 % t interval], n = 3 | seeds 0-1 (from table.csv) | seed 2 |")
+    print("| metric | mean ± std [95 % t interval], n = 3 | seeds 0-1, low and high (from table.csv) | seed 2 |")
     print("|---|---|---|---|")
     for column, label, scale in COLUMNS:
         pair = [v * scale for v in two_seed_values(table, column)]
