@@ -29,13 +29,18 @@ def task(cfg: DictConfig) -> str | float:
     """One Hydra job: resolve the config, run it, return the record key (with `objective` set: that
     metric of the record, for an optimizing sweeper)."""
     from ddfbench import launch, runner
+    from ddfbench.errors import InputError
     from ddfbench.report.tables import summarize, to_markdown
     from ddfbench.worker_guard import watch_launcher
 
     watch_launcher()  # a local_parallel worker stops with its sweep
     hc = HydraConfig.get()
     plain: dict[str, Any] = OmegaConf.to_container(cfg, resolve=True)  # type: ignore[assignment]
-    plain["threads"], device = launch.job_settings(plain, hc)
+    try:
+        plain["threads"], device = launch.job_settings(plain, hc)
+    except InputError as err:  # a setting of the whole command (threads): stop before any run
+        print(f"ddfbench: {err}", file=sys.stderr)
+        sys.exit(1)
     record = runner.run(plain, choices=dict(hc.runtime.choices), overrides=list(hc.overrides.task), device=device)
     with open(os.path.join(hc.runtime.output_dir, KEY_FILE), "w") as fh:
         fh.write(f"{record['experiment']}/{record['key']}\n")

@@ -12,6 +12,8 @@ from __future__ import annotations
 import os
 from typing import Any, Mapping
 
+from ddfbench.errors import checked_int
+
 
 def available_cores() -> int:
     """Cores this process may run on (the affinity mask where the OS has one, else all)."""
@@ -73,6 +75,6 @@ def job_settings(cfg: Mapping[str, Any], hydra_cfg: Any) -> tuple[int, str]:
 
     launcher = _get(hydra_cfg, "launcher")
     num = _get(hydra_cfg, "job.num")  # None outside a sweep
-    threads = job_threads(int(cfg.get("threads") or 0), launcher, available_cores())
+    threads = job_threads(checked_int(cfg.get("threads") or 0, "threads", 0), launcher, available_cores())
     device = job_device(str(_get(cfg, "train.device") or "cpu"), int(num or 0), torch.cuda.device_count())
     return threads, device

@@ -20,7 +20,7 @@ import torch
 from ddfbench import heap, plugins, runs
 from ddfbench.budget import fit_limit, fit_record
 from ddfbench.checkpoint import FILE as CHECKPOINT_FILE, Checkpoint, code_fingerprint
-from ddfbench.errors import InputError
+from ddfbench.errors import InputError, checked_int
 from ddfbench.geometry import BOX_HALF
 from ddfbench.metrics import cloud_metrics, geometry_metrics, penalty_metrics, sample_surface
 from ddfbench.models import load_family
@@ -134,7 +134,7 @@ def _stages(cfg: Mapping[str, Any], rdir: str, device: str, seed: int, out: dict
         artifacts["reconstruction"] = "reconstruction.ply"
 
     t0 = time.perf_counter()
-    out["metrics"] = geometry_metrics(shape.mesh, rec, int(ev["n_points"]), radii, seed=seed,
+    out["metrics"] = geometry_metrics(shape.mesh, rec, checked_int(ev["n_points"], "eval.n_points", 1), radii, seed=seed,
                                       noise_floor=bool(ev.get("noise_floor", True)),
                                       with_point_to_surface=bool(ev.get("point_to_surface", True)))
     cost["metrics_s"] = time.perf_counter() - t0
@@ -187,8 +187,7 @@ def run(cfg: Mapping[str, Any], choices: Mapping[str, str] | None = None,
 
     if cfg.get("force", False):  # a forced rerun starts its fit over
         Checkpoint(os.path.join(rdir, CHECKPOINT_FILE)).remove()
-    seed = int(cfg.get("seed", 0))
-    threads = _set_threads(int(cfg.get("threads", 0)))
+    threads = _set_threads(checked_int(cfg.get("threads") or 0, "threads", 0))
     heap_kept = heap.keep_freed_blocks()  # CPU fits reuse their multi-MB activations (ddfbench.heap)
     scene = dict(cfg.get("scene") or {})
     out: dict[str, Any] = {
@@ -208,6 +207,7 @@ def run(cfg: Mapping[str, Any], choices: Mapping[str, str] | None = None,
         out["env"] = {**runs.environment(device, threads), "glibc_heap_kept": heap_kept}
         if bad_level is not None:
             raise bad_level
+        seed = checked_int(cfg.get("seed", 0), "seed", 0)
         seed_everything(seed)  # a reused worker process starts each run from the same state
         _stages(cfg, rdir, device, seed, out)
         out["status"] = "ok"

@@ -84,13 +84,23 @@ def write_json_atomic(path: str, data: Mapping[str, Any]) -> None:
         raise
 
 
-def read_record(path: str) -> dict[str, Any] | None:
-    """The record at path, or None where there is none or it is not valid JSON."""
+def load_record(path: str) -> tuple[dict[str, Any] | None, str | None]:
+    """(the record at path, None), or (None, what is wrong with the file); (None, None) where there is none."""
     try:
-        with open(path) as fh:
-            return json.load(fh)
-    except (FileNotFoundError, json.JSONDecodeError):
-        return None
+        with open(path, encoding="utf-8") as fh:
+            rec = json.load(fh)
+    except FileNotFoundError:
+        return None, None
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        return None, f"not a readable JSON file ({type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''})"
+    if not isinstance(rec, dict):
+        return None, f"holds a JSON {type(rec).__name__}, not a run record (an object)"
+    return rec, None
+
+
+def read_record(path: str) -> dict[str, Any] | None:
+    """The record at path, or None where there is none or it is not one (a rerun writes it anew)."""
+    return load_record(path)[0]
 
 
 def is_done(path: str) -> bool:
@@ -100,10 +110,16 @@ def is_done(path: str) -> bool:
 
 
 def find_records(root: str) -> list[dict[str, Any]]:
-    """Every record.json below root (any depth), each with its own folder under "_dir"."""
+    """Every record.json below root (any depth), each with its own folder under "_dir". A file that is not
+    a record (cut short, not UTF-8, not a JSON object) is left out with a line on stderr naming it."""
     out = []
     for folder, _, files in os.walk(root):
-        if RECORD_FILE in files and (rec := read_record(os.path.join(folder, RECORD_FILE))):
+        if RECORD_FILE not in files:
+            continue
+        rec, problem = load_record(os.path.join(folder, RECORD_FILE))
+        if problem:
+            print(f"ddfbench: skipped {os.path.join(folder, RECORD_FILE)}: {problem}", file=sys.stderr)
+        elif rec is not None:
             rec["_dir"] = folder
             out.append(rec)
     return sorted(out, key=lambda r: (r.get("experiment", ""), r.get("key", "")))

@@ -56,8 +56,8 @@ def catalog() -> list[str]:
 
 def read_mesh_file(path: str) -> trimesh.Trimesh:
     """Parse a mesh file with trimesh; one-line InputError naming the file on any problem."""
-    if not path:
-        raise InputError("shape.path is empty: give a mesh file (e.g. shape=file shape.path=/data/chair.obj)")
+    if not path or path == "???":  # "???": OmegaConf's mark of a value conf/shape/file.yaml leaves to the user
+        raise InputError("shape.path is not set: give a mesh file (e.g. shape=file shape.path=/data/chair.obj)")
     if not os.path.exists(path):
         raise InputError(f"shape file {path}: does not exist")
     if os.path.isdir(path):

@@ -84,3 +84,28 @@ def test_sweep_goes_on_after_a_failure_and_report_renders(tmp_path):
     assert "mesh_lod500" in md and "failed" in md.lower()
     assert (tmp_path / "rep" / "table.tex").read_text().startswith("\\begin{tabular}")
     assert "chamfer_l2_mean" in (tmp_path / "rep" / "table.csv").read_text()
+
+
+@pytest.mark.parametrize("override,named", [("eval.n_points=0", "eval.n_points=0"),
+                                            ("seed=abc", "seed='abc'")])
+def test_a_bad_run_value_is_a_failed_record_naming_the_key(tmp_path, override, named):
+    out = ddfbench(SMALL + [override], tmp_path)
+    assert out.returncode == 1
+    last = out.stderr.strip().splitlines()[-1]
+    assert named in last and "Traceback" not in out.stderr
+    (rec,) = records(tmp_path)
+    assert rec["status"] == "failed" and named in rec["error"]
+
+
+def test_a_bad_seed_fails_its_own_run_and_the_sweep_goes_on(tmp_path):
+    out = ddfbench(["--multirun", "seed=0,abc", "experiment_name=seeds", *SMALL], tmp_path)
+    assert out.returncode == 0, out.stderr
+    assert sorted(r["status"] for r in records(tmp_path / "seeds")) == ["failed", "ok"]
+
+
+@pytest.mark.parametrize("args,named", [(["threads=-2"], "threads=-2: expected an integer >= 0"),
+                                        (["shape=file"], "shape.path is not set")])
+def test_a_bad_command_setting_is_one_line(tmp_path, args, named):
+    out = ddfbench([a for a in SMALL if not (a.startswith("shape=") and args[0].startswith("shape="))] + args, tmp_path)
+    assert out.returncode == 1
+    assert named in out.stderr.strip().splitlines()[-1] and "Traceback" not in out.stderr

@@ -92,3 +92,18 @@ def test_a_copied_tree_names_its_commit_through_the_environment(monkeypatch):
     monkeypatch.setenv(runs.GIT_SHA_ENV, "0123abc")
     env = runs.environment("cpu", 1)
     assert env["git_sha"] == env["code_sha"] == "0123abc" and env["git_sha_from"] == "DDFBENCH_GIT_SHA"
+
+
+def test_find_records_names_each_file_that_is_not_a_record(tmp_path, capsys):
+    runs.write_json_atomic(str(tmp_path / "good" / "record.json"), {"key": "good", "status": "ok"})
+    bad = {"truncated": b'{"key": "t", "stat', "latin1": b'{"key": "\xff"}', "list": b"[1, 2]"}
+    for name, content in bad.items():
+        (tmp_path / name).mkdir()
+        (tmp_path / name / "record.json").write_bytes(content)
+    assert [r["key"] for r in runs.find_records(str(tmp_path))] == ["good"]
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 3
+    for name, why in (("truncated", "JSONDecodeError"), ("latin1", "UnicodeDecodeError"), ("list", "JSON list")):
+        (line,) = [ln for ln in lines if str(tmp_path / name / "record.json") in ln]
+        assert why in line
+    assert runs.read_record(str(tmp_path / "list" / "record.json")) is None  # a rerun writes it anew

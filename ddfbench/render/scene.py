@@ -22,7 +22,7 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
-from ddfbench.errors import InputError
+from ddfbench.errors import InputError, checked_int
 from ddfbench.render.camera import Camera, orbit_cameras
 
 OUTPUTS = ("depth", "mask", "normal", "shaded", "shadow", "path")
@@ -108,10 +108,7 @@ def _vec3(value: Any, key: str) -> tuple[float, float, float]:
 
 
 def _int(cfg: Mapping[str, Any], key: str, default: int, least: int) -> int:
-    value = cfg.get(key, default)
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < least:
-        raise InputError(f"scene.{key}={value!r}: expected an integer >= {least}")
-    return int(value)
+    return checked_int(cfg.get(key, default), f"scene.{key}", least)
 
 
 def _positive(cfg: Mapping[str, Any], key: str, default: float, upper: float = math.inf) -> float:
