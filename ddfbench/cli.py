@@ -146,12 +146,24 @@ def check_extras(args: list[str]) -> None:
                              f"(pip install -e \".[{EXTRA_OF_EXPERIMENT[name][1]}]\")")
 
 
+def check_threads(args: list[str]) -> None:
+    """A one-line InputError for a `threads=` override that is not an integer >= 0, before Hydra starts, so
+    that every launcher reports it alike (a swept or YAML value is checked by launch.job_settings)."""
+    from ddfbench.errors import checked_int
+
+    for arg in args:
+        value = arg.split("=", 1)[1] if arg.startswith("threads=") else None
+        if value is not None and not any(c in value for c in ",()[]"):
+            checked_int(int(value) if value.lstrip("-").isdigit() else value, "threads", 0)
+
+
 def main() -> None:
     """Entry point. Without `model=` or `+experiment=`, run `+experiment=default` with the given overrides."""
     from ddfbench.errors import InputError
 
     try:
         check_extras(sys.argv[1:])
+        check_threads(sys.argv[1:])
         sys.argv[1:] = checked_overrides(sys.argv[1:])
     except InputError as err:
         print(f"ddfbench: {err}", file=sys.stderr)

@@ -8,10 +8,12 @@ class InputError(ValueError):
 
 
 def checked_int(value: object, name: str, least: int) -> int:
-    """value as an int >= least (a bool, a float or a string is not one); an InputError naming name=value otherwise."""
-    if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < least:
-        raise InputError(f"{name}={value!r}: expected an integer >= {least}")
-    return int(value)
+    """value as an int >= least: an integer, or a whole float such as Hydra's 1e5 (a bool or a string is not
+    one); an InputError naming name=value otherwise."""
+    whole = isinstance(value, numbers.Real) and not isinstance(value, bool) and float(value).is_integer()
+    if not whole or value < least:  # type: ignore[operator]
+        raise InputError(f"{name}={value!r}: must be an integer >= {least}")
+    return int(value)  # type: ignore[call-overload]
 
 
 def one_line(err: BaseException) -> str:

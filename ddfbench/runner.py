@@ -66,6 +66,8 @@ def _stages(cfg: Mapping[str, Any], rdir: str, device: str, seed: int, out: dict
     from ddfbench import sampling
 
     cost, artifacts = out["cost"], out["artifacts"]
+    ev, tr = cfg["eval"], cfg["train"]
+    n_points = checked_int(ev["n_points"], "eval.n_points", 1)  # before the fit, whose probes may use it too
     shape = load_shape(cfg["shape"])
     out["shape"] = shape.summary()
     oracle = Oracle(shape.mesh, **cfg.get("oracle", {}))
@@ -94,7 +96,6 @@ def _stages(cfg: Mapping[str, Any], rdir: str, device: str, seed: int, out: dict
         cost["sampling_s"] = float(info.get("sampling_s", 0.0))
         artifacts["dataset"] = os.path.relpath(dataset_path, rdir)
 
-    ev, tr = cfg["eval"], cfg["train"]
     radii = [float(r) for r in ev["radii"]]
     domain = float(cfg.get("domain", BOX_HALF))
     rep = Family(dict(cfg["model"]), domain=domain)
@@ -134,7 +135,7 @@ def _stages(cfg: Mapping[str, Any], rdir: str, device: str, seed: int, out: dict
         artifacts["reconstruction"] = "reconstruction.ply"
 
     t0 = time.perf_counter()
-    out["metrics"] = geometry_metrics(shape.mesh, rec, checked_int(ev["n_points"], "eval.n_points", 1), radii, seed=seed,
+    out["metrics"] = geometry_metrics(shape.mesh, rec, n_points, radii, seed=seed,
                                       noise_floor=bool(ev.get("noise_floor", True)),
                                       with_point_to_surface=bool(ev.get("point_to_surface", True)))
     cost["metrics_s"] = time.perf_counter() - t0

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numbers
 from typing import Any, Iterable, Mapping
 
-from ddfbench.errors import InputError
+from ddfbench.errors import InputError, checked_int
 
 
 def check_keys(cfg: Mapping[str, Any], allowed: Iterable[str]) -> None:
@@ -21,12 +21,8 @@ def check_keys(cfg: Mapping[str, Any], allowed: Iterable[str]) -> None:
 
 
 def count(cfg: Mapping[str, Any], key: str, minimum: int = 1) -> int:
-    """An integer >= minimum (an integral float such as 10.0 is accepted)."""
-    v = cfg[key]
-    ok = isinstance(v, numbers.Real) and not isinstance(v, bool) and float(v).is_integer() and v >= minimum
-    if not ok:
-        raise InputError(f"sampling.{key}={v!r}: must be an integer >= {minimum}")
-    return int(v)
+    """sampling.<key> as an integer >= minimum (an integral float such as 10.0 is accepted)."""
+    return checked_int(cfg[key], f"sampling.{key}", minimum)
 
 
 def positive(cfg: Mapping[str, Any], key: str) -> float:
