@@ -147,14 +147,24 @@ def check_extras(args: list[str]) -> None:
 
 
 def check_threads(args: list[str]) -> None:
-    """A one-line InputError for a `threads=` override that is not an integer >= 0, before Hydra starts, so
-    that every launcher reports it alike (a swept or YAML value is checked by launch.job_settings)."""
+    """A one-line InputError for a `threads=` override that is not an integer >= 0 (null or empty: 0), before
+    Hydra starts, so that every launcher reports it alike. A sweep, an interpolation and a value Hydra cannot
+    parse are left to Hydra and to launch.job_settings, which checks each job's value."""
+    from hydra.core.override_parser.overrides_parser import OverridesParser
+    from hydra.errors import HydraException
+
     from ddfbench.errors import checked_int
 
     for arg in args:
-        value = arg.split("=", 1)[1] if arg.startswith("threads=") else None
-        if value is not None and not any(c in value for c in ",()[]"):
-            checked_int(int(value) if value.lstrip("-").isdigit() else value, "threads", 0)
+        if not arg.startswith("threads="):
+            continue
+        try:
+            (override,) = OverridesParser.create().parse_overrides([arg])
+        except HydraException:
+            continue
+        value = None if override.is_sweep_override() else override.value()
+        if value not in (None, "") and not (isinstance(value, str) and "${" in value):
+            checked_int(value, "threads", 0)
 
 
 def main() -> None:

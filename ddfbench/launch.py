@@ -75,6 +75,8 @@ def job_settings(cfg: Mapping[str, Any], hydra_cfg: Any) -> tuple[int, str]:
 
     launcher = _get(hydra_cfg, "launcher")
     num = _get(hydra_cfg, "job.num")  # None outside a sweep
-    threads = job_threads(checked_int(cfg.get("threads") or 0, "threads", 0), launcher, available_cores())
+    raw = cfg.get("threads") or 0
+    raw = int(raw) if isinstance(raw, str) and raw.strip().isdigit() else raw  # ${oc.env:...} gives a string
+    threads = job_threads(checked_int(raw, "threads", 0), launcher, available_cores())
     device = job_device(str(_get(cfg, "train.device") or "cpu"), int(num or 0), torch.cuda.device_count())
     return threads, device

@@ -103,9 +103,13 @@ def test_a_bad_run_value_is_a_failed_record_naming_the_key(tmp_path, args, named
 
 
 def test_a_bad_seed_fails_its_own_run_and_the_sweep_goes_on(tmp_path):
-    out = ddfbench(["--multirun", "seed=0,abc", "experiment_name=seeds", *SMALL], tmp_path)
+    out = ddfbench(["--multirun", "seed=0,abc", "experiment_name=seeds", *[a for a in SMALL if a != "scene=none"],
+                    "scene.width=8", "scene.height=8"], tmp_path)
     assert out.returncode == 0, out.stderr
     assert sorted(r["status"] for r in records(tmp_path / "seeds")) == ["failed", "ok"]
+    rep = ddfbench([str(tmp_path / "seeds"), "--out", str(tmp_path / "rep")], tmp_path, module="ddfbench.report")
+    assert rep.returncode == 0, rep.stderr  # the gallery orders the ok runs by seed: the failed 'abc' is not one
+    assert (tmp_path / "rep" / "gallery.png").is_file() and "seed='abc'" in (tmp_path / "rep" / "report.md").read_text()
 
 
 @pytest.mark.parametrize("value,named", [("-2", "threads=-2"), ("two", "threads='two'")])

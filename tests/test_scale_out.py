@@ -12,7 +12,8 @@ import time
 import pytest
 import trimesh
 
-from ddfbench.launch import job_device, job_threads
+from ddfbench.errors import InputError
+from ddfbench.launch import available_cores, job_device, job_settings, job_threads
 from ddfbench.report.__main__ import main as report_main
 from ddfbench.report.status import format_status, sweep_status
 from ddfbench.runs import RECORD_FIELDS, find_records
@@ -113,6 +114,14 @@ def test_reserved_cores_and_explicit_threads_win():
     assert job_threads(5, {"n_jobs": 4}, 16) == 5  # threads=5 on the command line is kept
     assert job_threads(0, {"_target_": "BasicLauncher"}, 6) == 6  # one job at a time: every core
     assert job_threads(0, None, 6) == 6
+
+
+def test_job_settings_take_an_environment_variable_s_digits_and_refuse_a_negative_count():
+    hydra_cfg = {"launcher": {"n_jobs": 2}, "job": {"num": 0}}
+    assert job_settings({"threads": "3"}, hydra_cfg)[0] == 3  # threads=${oc.env:SLURM_CPUS_PER_TASK}: a string
+    assert job_settings({"threads": None}, hydra_cfg)[0] == job_threads(0, hydra_cfg["launcher"], available_cores())
+    with pytest.raises(InputError, match=r"threads=-1: must be an integer >= 0"):
+        job_settings({"threads": -1}, hydra_cfg)
 
 
 def test_device_follows_the_visible_gpus():

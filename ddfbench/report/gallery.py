@@ -65,9 +65,8 @@ def shaded_mesh_view(mesh_path: str | None, scene_cfg: dict[str, Any]) -> np.nda
 def _cells(records: list[dict[str, Any]]) -> dict[tuple[str, str], dict[str, Any]]:
     """(model, shape) → the record shown there: the ok record with renders of the lowest seed."""
     cells: dict[tuple[str, str], dict[str, Any]] = {}
-    for rec in sorted(records, key=lambda r: int((r.get("config") or {}).get("seed", 0))):
-        if _render_png(rec) is None:
-            continue
+    shown = [rec for rec in records if _render_png(rec) is not None]  # ok runs (a failed one may hold seed='abc')
+    for rec in sorted(shown, key=lambda r: int((r.get("config") or {}).get("seed", 0))):
         cells.setdefault((str(rec.get("model")), shape_name(rec)), rec)
     return cells
 
