@@ -1,17 +1,18 @@
-"""Three-seed summary of `gan_sdf_tuned` at the thesis' 40 epochs, pooled from two committed reports of
-the same code (332b432), because the records of seeds 0-1 went with the machine that ran them:
+"""Summary of `gan_sdf_tuned` at the thesis' 40 epochs over every seed run so far, pooled from committed
+reports of the same code (332b432), because the records of seeds 0-1 went with the machine that ran them:
 
   table.csv         the two-seed report (seeds 0 and 1): for n = 2 the two values of a column are
                     mean - std/sqrt(2) and mean + std/sqrt(2) (which seed is which does not change a pool)
-  seed2/runs.csv    seed 2's own run row (the report writes runs.csv since a318b35)
+  seed<K>/runs.csv  seed K's own one-seed report (K >= 2; the report writes runs.csv since a318b35)
 
 usage (from the repository root): python reports/gan_epochs_tuned/pool_seeds.py > reports/gan_epochs_tuned/pooled.md
-Prints a markdown table: mean ± std [95 % t interval] over the 3 seeds (ddfbench.report.stats), and the
+Prints a markdown table: mean ± std [95 % t interval] over the seeds (ddfbench.report.stats), and the
 per-seed values.
 """
 
 from __future__ import annotations
 
+import glob
 import math
 import os
 
@@ -36,21 +37,35 @@ def two_seed_values(table: pd.DataFrame, column: str) -> list[float]:
     return [mean - std / math.sqrt(2), mean + std / math.sqrt(2)]
 
 
+def later_seeds() -> list[pd.Series]:
+    """Each seed<K>/ report's one finished run of gan_sdf_tuned, in seed order."""
+    rows = []
+    for path in glob.glob(os.path.join(HERE, "seed*", "runs.csv")):
+        runs = pd.read_csv(path)
+        runs = runs[(runs["model"] == "gan_sdf_tuned") & (runs["status"] == "ok")]
+        folder = os.path.basename(os.path.dirname(path))
+        assert len(runs) == 1 and folder == f"seed{int(runs.iloc[0]['seed'])}", \
+            f"{path} must hold one finished run of the seed its folder names"
+        rows.append(runs.iloc[0])
+    return sorted(rows, key=lambda row: int(row["seed"]))
+
+
 def main() -> None:
     table = pd.read_csv(os.path.join(HERE, "table.csv"))
-    seed2 = pd.read_csv(os.path.join(HERE, "seed2", "runs.csv"))
-    seed2 = seed2[(seed2["model"] == "gan_sdf_tuned") & (seed2["status"] == "ok")].iloc[0]
-    assert int(seed2["seed"]) == 2, "seed2/runs.csv must hold seed 2"
-    print("# gan_sdf_tuned at 40 epochs on the bunny: seeds 0-2 pooled (pool_seeds.py; code 332b432)\n")
-    print("| metric | mean ± std [95 % t interval], n = 3 | seeds 0-1, low and high (from table.csv) | seed 2 |")
-    print("|---|---|---|---|")
+    later = later_seeds()
+    names = [f"seed {int(row['seed'])}" for row in later]
+    n = 2 + len(later)
+    print(f"# gan_sdf_tuned at 40 epochs on the bunny: seeds 0-1 and {', '.join(str(int(r['seed'])) for r in later)} "
+          "pooled (pool_seeds.py; code 332b432)\n")
+    print(f"| metric | mean ± std [95 % t interval], n = {n} | seeds 0-1, low and high (from table.csv) | "
+          + " | ".join(names) + " |")
+    print("|---|---|---|" + "---|" * len(later))
     for column, label, scale in COLUMNS:
         pair = [v * scale for v in two_seed_values(table, column)]
-        third = float(seed2[column]) * scale
-        s = summarize_values(pair + [third])
+        rest = [float(row[column]) * scale for row in later]
+        s = summarize_values(pair + rest)
         print(f"| {label} | {s.mean:.4g} ± {s.std:.2g} [{s.lo:.4g}, {s.hi:.4g}] | "
-              f"{pair[0]:.4g}, {pair[1]:.4g} | {third:.4g} |")
-
+              f"{pair[0]:.4g}, {pair[1]:.4g} | " + " | ".join(f"{v:.4g}" for v in rest) + " |")
 
 if __name__ == "__main__":
     main()
