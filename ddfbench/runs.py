@@ -18,6 +18,8 @@ import sys
 import tempfile
 from typing import Any, Mapping
 
+from ddfbench.errors import one_line
+
 SCHEMA_VERSION = 1
 
 # Top-level config keys that do not change results: paths, resume flags, worker counts, logging, tracking.
@@ -92,7 +94,7 @@ def load_record(path: str) -> tuple[dict[str, Any] | None, str | None]:
     except FileNotFoundError:
         return None, None
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-        return None, f"not a readable JSON file ({type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''})"
+        return None, f"not a readable JSON file ({one_line(exc)})"
     if not isinstance(rec, dict):
         return None, f"holds a JSON {type(rec).__name__}, not a run record (an object)"
     return rec, None
