@@ -107,7 +107,8 @@ Probe = Callable[["Representation"], dict[str, float]]
 
 
 class Representation(abc.ABC):
-    """A shape family. Subclass in `ddfbench/models/<family>.py` and expose it as `FAMILY`.
+    """A shape family. Subclass in `ddfbench/models/<family>.py` (or a package `models/<family>/`) and expose it as
+    `FAMILY`.
 
     cfg is the `model` config node as a plain dict, checked and completed by `configure` (the family's
     conf/model/<family>.yaml is the one source of its defaults); domain is the half-side of the field box.

@@ -28,7 +28,7 @@ NON_SEMANTIC_KEYS = ("out_dir", "force", "threads", "quiet", "experiment_name", 
 
 RECORD_FIELDS = (
     "schema_version", "key", "status", "error", "experiment", "family", "model", "shape", "sampling",
-    "scene", "metrics", "cost", "counts", "artifacts", "config", "overrides", "env", "started", "finished",
+    "scene", "metrics", "cost", "counts", "artifacts", "flags", "config", "overrides", "env", "started", "finished",
 )
 
 

@@ -39,7 +39,7 @@ import torch
 from tqdm import tqdm
 
 from ddfbench.checkpoint import restore, rng_state, set_rng_state, state_of
-from ddfbench.render.timing import clock
+from ddfbench.clock import clock
 from ddfbench.errors import InputError
 from ddfbench.representation import Budget, FitStats
 

@@ -87,3 +87,25 @@ def test_a_circle_is_found():
 
 def test_no_module_imports_one_that_imports_it_back():
     assert circles(import_graph()) == []
+
+
+def reachable(graph: dict[str, set[str]], start: str) -> set[str]:
+    """Every module `start` imports, directly or through others."""
+    seen, todo = set(), [start]
+    while todo:
+        for w in graph[todo.pop()] - seen:
+            seen.add(w)
+            todo.append(w)
+    return seen
+
+
+def test_a_family_reaches_no_layer_above_it():
+    """DESIGN.md: imports only point down; a family never imports the renderer, a bench, the reports or the
+    runner (training's clock lives in ddfbench.clock, not in ddfbench.render.timing)."""
+    graph = import_graph()
+    above = ("ddfbench.render", "ddfbench.bench", "ddfbench.report", "ddfbench.runner", "ddfbench.cli")
+    families = [m for m in graph if m.startswith("ddfbench.models")]
+    assert "ddfbench.models.ddf.fit" in families
+    for family in families:
+        bad = sorted(m for m in reachable(graph, family) if m.startswith(above))
+        assert not bad, f"{family} reaches {bad}"

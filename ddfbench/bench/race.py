@@ -20,7 +20,7 @@ DDF's fastest variant, Warp and Embree) and the four DDF capacities of the Paret
 (conf/experiment/pareto.yaml, each trained `fit_seconds`) on the primary rays.
 Accuracy: depth MAE on rays both the contestant and the reference hit, and mask IoU, against Embree on
 the same rays (the open3d oracle, or with `--oracle-backend warp` the embreex pool, so that warp_bvh is
-never scored against itself; Warp's own answers only where embreex is missing too, as details say). Every timed call is synchronized (ddfbench.render.timing.clock), warm-up
+never scored against itself; Warp's own answers only where embreex is missing too, as details say). Every timed call is synchronized (ddfbench.clock.clock), warm-up
 excluded (ddfbench.bench.timing). Absolute figures hold for the device named in the JSON's env.
 Sizes: shape, px, incoherent_rays, sweep (ray counts), embree_max (largest sweep count Embree runs),
 fit_seconds, grid_resolution, n_samples (neural SDF samples), chunk (DDF rays per network call),

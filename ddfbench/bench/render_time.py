@@ -35,7 +35,7 @@ from ddfbench.geometry import BOX_HALF
 from ddfbench.render import mesh_reference
 from ddfbench.render.integrator import render
 from ddfbench.render.scene import parse_scene, plan_passes
-from ddfbench.render.timing import clock, compute_threads
+from ddfbench.clock import clock, compute_threads
 from ddfbench.representation import Representation
 from ddfbench.shapes import load_shape
 

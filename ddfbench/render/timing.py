@@ -1,52 +1,16 @@
 """Render timing: the cold render (the first, with whatever setup the representation does lazily:
 BVH commit, weights to the device, kernel compilation) apart from warm renders (median and IQR of
-`repeats` renders after `warmup` untimed ones). When torch has CUDA in use, every clock read waits
-for the device (torch.cuda.synchronize), so queued kernels are counted. `timed` and `median_iqr`
-(one call's seconds; the warm median and IQR) serve ddfbench.bench.timing too.
+`repeats` renders after `warmup` untimed ones), each on ddfbench.clock's synchronized clock.
 """
 
 from __future__ import annotations
 
-import os
-import sys
-import time
 from dataclasses import dataclass
 from typing import Callable, TypeVar
 
-import numpy as np
+from ddfbench.clock import median_iqr, timed
 
 T = TypeVar("T")
-
-
-def _synchronize() -> None:
-    torch = sys.modules.get("torch")  # only a process that already uses torch can have queued CUDA work
-    if torch is not None and torch.cuda.is_available() and torch.cuda.is_initialized():
-        torch.cuda.synchronize()
-
-
-def compute_threads() -> int:
-    """Threads a render may use: torch's intra-op threads where torch is loaded, else the CPU count."""
-    torch = sys.modules.get("torch")
-    return int(torch.get_num_threads()) if torch is not None else int(os.cpu_count() or 1)
-
-
-def clock() -> float:
-    """perf_counter seconds, after any queued CUDA work has finished."""
-    _synchronize()
-    return time.perf_counter()
-
-
-def timed(fn: Callable[[], T]) -> tuple[T, float]:
-    """(fn's result, its seconds on clock())."""
-    start = clock()
-    out = fn()
-    return out, clock() - start
-
-
-def median_iqr(seconds: list[float]) -> tuple[float, float]:
-    """(median, interquartile range q75 − q25) of timed calls; seconds must not be empty."""
-    q1, median, q3 = np.percentile(seconds, [25, 50, 75])
-    return float(median), float(q3 - q1)
 
 
 @dataclass
