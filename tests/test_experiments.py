@@ -5,6 +5,7 @@ into records and report files that all parse."""
 import functools
 import json
 import os
+import re
 import subprocess
 import sys
 
@@ -197,6 +198,12 @@ def test_smoke_runs_every_family_and_strategy_and_reports(tmp_path):
         no_samples = load_family(rec["family"]).sample_kind is None
         assert no_samples == (rec["sampling"]["kind"] is None) == ("sampling_s" not in rec["cost"]), rec["key"]
         assert no_samples == ("n_samples" not in rec["sampling"]), rec["key"]
+    doc = os.path.join(os.path.dirname(__file__), "..", "docs", "record.md")
+    documented = set(re.findall(r"`([^`]+)`", open(doc).read()))
+    for rec in records:  # docs/record.md names every key a record has, at the top and one level down
+        keys = {k for k in rec if k != "_dir"} | {k for part in ("shape", "metrics", "cost", "counts", "artifacts", "env",
+                                                                 "fit") for k in rec.get(part) or {}}
+        assert keys <= documented, (rec["model"], sorted(keys - documented))
 
     out = tmp_path / "report"
     rep = subprocess.run([sys.executable, "-m", "ddfbench.report", str(tmp_path / "smoke"), "--out", str(out)],
