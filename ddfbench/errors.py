@@ -16,6 +16,11 @@ def checked_int(value: object, name: str, least: int) -> int:
     return int(value)  # type: ignore[call-overload]
 
 
+def first_line(err: BaseException) -> str:
+    """The first line of err's message ('' for none)."""
+    return (str(err).strip().splitlines() or [""])[0]
+
+
 def one_line(err: BaseException) -> str:
     """'ExceptionType: first line of its message', for a report or a note."""
-    return f"{type(err).__name__}: {(str(err).strip().splitlines() or [''])[0]}"
+    return f"{type(err).__name__}: {first_line(err)}"

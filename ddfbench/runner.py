@@ -20,7 +20,7 @@ import torch
 from ddfbench import heap, plugins, runs
 from ddfbench.budget import fit_limit, fit_record
 from ddfbench.checkpoint import FILE as CHECKPOINT_FILE, Checkpoint, code_fingerprint
-from ddfbench.errors import InputError, checked_int
+from ddfbench.errors import InputError, checked_int, first_line, one_line
 from ddfbench.geometry import BOX_HALF
 from ddfbench.metrics import cloud_metrics, geometry_metrics, penalty_metrics, sample_surface
 from ddfbench.models import load_family
@@ -154,10 +154,10 @@ def _stages(cfg: Mapping[str, Any], rdir: str, device: str, seed: int, out: dict
         artifacts["renders"] = result.get("artifacts")
 
 
-def _one_line(exc: BaseException) -> str:
-    text = str(exc).strip().splitlines()
-    msg = text[0] if text else ""
-    return msg if isinstance(exc, (InputError, StageFailed)) else f"{type(exc).__name__}: {msg}"
+def _record_error(exc: BaseException) -> str:
+    """The record's `error`: the message alone where it is ours and names what is wrong (InputError,
+    StageFailed), else errors.one_line (its type first); the traceback goes to error.log."""
+    return first_line(exc) if isinstance(exc, (InputError, StageFailed)) else one_line(exc)
 
 
 def run(cfg: Mapping[str, Any], choices: Mapping[str, str] | None = None,
@@ -213,7 +213,7 @@ def run(cfg: Mapping[str, Any], choices: Mapping[str, str] | None = None,
         _stages(cfg, rdir, device, seed, out)
         out["status"] = "ok"
     except Exception as exc:  # every failure becomes a record, never a crash mid-sweep
-        out["error"] = _one_line(exc)
+        out["error"] = _record_error(exc)
         os.makedirs(rdir, exist_ok=True)
         with open(os.path.join(rdir, "error.log"), "w") as fh:
             fh.write(traceback.format_exc())
