@@ -19,7 +19,8 @@ from hydra.experimental.callback import Callback
 from hydra.types import RunMode
 from omegaconf import DictConfig, OmegaConf
 
-from ddfbench import CONF_DIR, plugins  # plugins registers the `members` resolver the experiments use
+from ddfbench.core import plugins
+from ddfbench.core.plugins import CONF_DIR  # plugins registers the `members` resolver the experiments use
 
 KEY_FILE = "ddfbench_key.txt"  # written in each Hydra job folder: which record the job produced
 
@@ -28,10 +29,10 @@ KEY_FILE = "ddfbench_key.txt"  # written in each Hydra job folder: which record 
 def task(cfg: DictConfig) -> str | float:
     """One Hydra job: resolve the config, run it, return the record key (with `objective` set: that
     metric of the record, for an optimizing sweeper)."""
-    from ddfbench import launch, runner
-    from ddfbench.errors import InputError
+    from ddfbench.core.errors import InputError
     from ddfbench.report.tables import summarize, to_markdown
-    from ddfbench.worker_guard import watch_launcher
+    from ddfbench.run import launch, runner
+    from ddfbench.run.worker_guard import watch_launcher
 
     watch_launcher()  # a local_parallel worker stops with its sweep
     hc = HydraConfig.get()
@@ -45,7 +46,7 @@ def task(cfg: DictConfig) -> str | float:
     with open(os.path.join(hc.runtime.output_dir, KEY_FILE), "w") as fh:
         fh.write(f"{record['experiment']}/{record['key']}\n")
     if hc.mode == RunMode.MULTIRUN:
-        from ddfbench.progress import job_finished
+        from ddfbench.run.progress import job_finished
 
         if (text := job_finished(os.path.dirname(hc.runtime.output_dir), record)) is not None:
             print(text, flush=True)
@@ -56,17 +57,17 @@ def task(cfg: DictConfig) -> str | float:
             print(f"ddfbench: {record['error']}", file=sys.stderr)
             sys.exit(1)
     if cfg.get("objective"):
-        from ddfbench.metric_registry import objective_value
+        from ddfbench.evaluate.metric_registry import objective_value
 
         return objective_value(record, str(cfg.objective))
     return record["key"]
 
 
 class SweepTableCallback(Callback):
-    """Sweep progress lines (ddfbench.progress) and, at the end of a sweep, the table of its records."""
+    """Sweep progress lines (ddfbench.run.progress) and, at the end of a sweep, the table of its records."""
 
     def on_multirun_start(self, config: DictConfig, **kwargs: Any) -> None:
-        from ddfbench.progress import count_jobs, start_sweep
+        from ddfbench.run.progress import count_jobs, start_sweep
 
         sweeper = config.hydra.sweeper
         total = count_jobs(list(config.hydra.overrides.task), sweeper.get("params"), sweeper.get("n_trials"))
@@ -77,7 +78,7 @@ class SweepTableCallback(Callback):
 
     def on_multirun_end(self, config: DictConfig, **kwargs: Any) -> None:
         from ddfbench.report.tables import summarize, to_markdown
-        from ddfbench.runs import RECORD_FILE, read_record
+        from ddfbench.run.runs import RECORD_FILE, read_record
 
         sweep_dir, out_dir = str(config.hydra.sweep.dir), str(config.get("out_dir", "results"))
         records = []
@@ -137,7 +138,7 @@ def check_extras(args: list[str]) -> None:
     """A one-line InputError when the experiment named in args needs an extra that is not installed."""
     import importlib.util
 
-    from ddfbench.errors import InputError
+    from ddfbench.core.errors import InputError
 
     for arg in args:
         name = arg.split("=", 1)[1] if arg.lstrip("+").startswith("experiment=") else None
@@ -153,7 +154,7 @@ def check_threads(args: list[str]) -> None:
     from hydra.core.override_parser.overrides_parser import OverridesParser
     from hydra.errors import HydraException
 
-    from ddfbench.errors import checked_int
+    from ddfbench.core.errors import checked_int
 
     for arg in args:
         if not arg.startswith("threads="):
@@ -169,7 +170,7 @@ def check_threads(args: list[str]) -> None:
 
 def main() -> None:
     """Entry point. Without `model=` or `+experiment=`, run `+experiment=default` with the given overrides."""
-    from ddfbench.errors import InputError
+    from ddfbench.core.errors import InputError
 
     try:
         check_extras(sys.argv[1:])

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 import torch
 
-from ddfbench.shapes import load_shape
+from ddfbench.truth.shapes import load_shape
 
 torch.set_num_threads(1)
 

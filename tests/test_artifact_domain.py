@@ -8,8 +8,8 @@ import pytest
 import torch
 import trimesh
 
-from ddfbench.errors import InputError
-from ddfbench.geometry import BOX_HALF
+from ddfbench.core.errors import InputError
+from ddfbench.core.geometry import BOX_HALF
 from ddfbench.models import available_families, load_family
 
 STORING = [f for f in ("ddf", "neural_sdf", "gan_sdf", "grid_sdf") if f in available_families()]

@@ -14,7 +14,7 @@ from ddfbench.bench import CUDA_ONLY_BY_DEFAULT, SECTIONS, render_time
 from ddfbench.bench.__main__ import main
 from ddfbench.bench.results import Target, compare
 from ddfbench.bench.timing import measure, measure_side_by_side, precision_context
-from ddfbench.trace import TraceOptions
+from ddfbench.evaluate.trace import TraceOptions
 
 
 @pytest.fixture(scope="module")

@@ -1,4 +1,4 @@
-"""Fit budgets (ddfbench.budget): steps and epochs fix the work, wall-clock is labelled as such; the runner
+"""Fit budgets (ddfbench.fit.budget): steps and epochs fix the work, wall-clock is labelled as such; the runner
 records the bound that ended a fit, the epochs made, and fits a seeded subset at train.n_labels."""
 
 import math
@@ -7,9 +7,9 @@ import sys
 
 import pytest
 
-from ddfbench.budget import fit_limit, fit_record
-from ddfbench.errors import InputError
-from ddfbench.runs import find_records
+from ddfbench.core.errors import InputError
+from ddfbench.fit.budget import fit_limit, fit_record
+from ddfbench.run.runs import find_records
 
 TRAIN = {"max_steps": 1000, "max_seconds": 5.0, "max_epochs": 2.5}
 

@@ -16,14 +16,15 @@ from hydra import compose, initialize_config_dir
 from omegaconf import OmegaConf
 
 import ddfbench
-from ddfbench import CONF_DIR, runner
-from ddfbench.checkpoint import FILE, Checkpoint, code_fingerprint
+from ddfbench.core.plugins import CONF_DIR
+from ddfbench.core.representation import Budget, FitData
+from ddfbench.fit.checkpoint import FILE, Checkpoint, code_fingerprint
 from ddfbench.models import load_family
-from ddfbench.oracle import Oracle
-from ddfbench.representation import Budget, FitData
-from ddfbench.runs import find_records
-from ddfbench.samples import Samples
+from ddfbench.run import runner
+from ddfbench.run.runs import find_records
 from ddfbench.sampling.oracle_sdf import oracle_sdf_samples
+from ddfbench.sampling.samples import Samples
+from ddfbench.truth.oracle import Oracle
 from tests.conftest import random_rays
 
 STEPS = 12

@@ -5,7 +5,7 @@ import pytest
 
 from ddfbench.report import claims
 from ddfbench.report.__main__ import main as report_main
-from ddfbench.runs import write_json_atomic
+from ddfbench.run.runs import write_json_atomic
 
 SEEDS = (0, 1, 2)
 
@@ -172,7 +172,8 @@ def test_the_models_the_claims_compare_are_those_the_experiments_run():
     render_time sweep (a renamed or dropped preset would leave the claims without records)."""
     from hydra import compose, initialize_config_dir
 
-    from ddfbench import CONF_DIR, plugins
+    from ddfbench.core import plugins
+    from ddfbench.core.plugins import CONF_DIR
     from ddfbench.report import matched
 
     for experiment in ("representations", "render_time"):

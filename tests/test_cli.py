@@ -7,7 +7,7 @@ import sys
 
 import pytest
 
-from ddfbench.runs import RECORD_FIELDS, find_records
+from ddfbench.run.runs import RECORD_FIELDS, find_records
 
 pytestmark = pytest.mark.slow  # every test here starts `python -m ddfbench` in a subprocess
 

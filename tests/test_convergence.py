@@ -7,7 +7,7 @@ import pytest
 
 from ddfbench.report import convergence
 from ddfbench.report.__main__ import main as report_main
-from ddfbench.runs import write_json_atomic
+from ddfbench.run.runs import write_json_atomic
 
 
 def run(model, shape, seed, probes, floor=1e-5):
@@ -88,7 +88,7 @@ def test_probe_rows_are_each_ok_runs_probes_in_seed_and_step_order_with_their_ep
 
 @pytest.mark.slow  # expands the sweep (~0.2 s a job)
 def test_the_convergence_sweep_is_every_learned_family_on_bunny_and_bone_with_three_seeds():
-    from ddfbench import plugins
+    from ddfbench.core import plugins
     from ddfbench.models import learned_families
     from ddfbench.report.status import expected_grid
 
@@ -107,7 +107,7 @@ def test_the_convergence_sweep_is_every_learned_family_on_bunny_and_bone_with_th
 def test_paper_ddf_is_both_paper_presets_on_every_shape_at_ten_minutes():
     from hydra import compose, initialize_config_dir
 
-    from ddfbench import CONF_DIR
+    from ddfbench.core.plugins import CONF_DIR
     from ddfbench.report.status import expected_grid
 
     jobs, _ = expected_grid("/nonexistent/paper_ddf", ["+experiment=paper_ddf"])

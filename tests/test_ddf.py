@@ -8,14 +8,14 @@ import torch
 import trimesh
 from omegaconf import OmegaConf
 
-from ddfbench.errors import InputError
-from ddfbench.models.ddf import family as ddf_module  # ONE_PASS_HIT_SHARE lives there
+from ddfbench.core.errors import InputError
+from ddfbench.core.geometry import box_entry
+from ddfbench.core.representation import Budget, FitData, RayStatus
 from ddfbench.models import load_family
-from ddfbench.geometry import box_entry
 from ddfbench.models.ddf import DDF, fibonacci_directions, line_entry_labels, line_vote
-from ddfbench.oracle import Oracle
-from ddfbench.representation import Budget, FitData, RayStatus
-from ddfbench.samples import Samples
+from ddfbench.models.ddf import family as ddf_module  # ONE_PASS_HIT_SHARE lives there
+from ddfbench.sampling.samples import Samples
+from ddfbench.truth.oracle import Oracle
 
 R0 = 0.4
 CONF = os.path.join(os.path.dirname(__file__), "..", "conf", "model")

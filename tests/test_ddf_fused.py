@@ -1,4 +1,4 @@
-"""ddfbench.ddf_fused: the DDF's MLP as one Triton kernel gives the layer-by-layer bf16 answer.
+"""ddfbench.models.ddf.fused: the DDF's MLP as one Triton kernel gives the layer-by-layer bf16 answer.
 
 On CUDA (`pytest -m gpu`) the kernel runs on the device; without CUDA, where Triton is installed, the same
 checks run in one subprocess under TRITON_INTERPRET=1 (Triton's CPU interpreter; the variable must be set
@@ -76,7 +76,7 @@ def responsive(rep: DDF, o: torch.Tensor, d: torch.Tensor) -> DDF:
     """rep with every body weight x2.5 (a random ReLU stack otherwise answers nearly the same for every input:
     for 256 x 6 the logits spread by ~0.002) and its output biases shifted so that the rays o + t d get
     distances around half their chord inside the box and about half of them count as visible."""
-    from ddfbench.geometry import box_entry
+    from ddfbench.core.geometry import box_entry
 
     t_entry, t_exit, meets = box_entry(o, d, rep.domain)
     with torch.no_grad():
@@ -123,7 +123,7 @@ def needs_a_kernel_runner(test: str) -> bool:
 def test_fused_mlp_equals_the_layerwise_bf16_forward(shape):
     if not needs_a_kernel_runner(f"test_fused_mlp_equals_the_layerwise_bf16_forward[{IDS[NETWORKS.index(shape)]}]"):
         return
-    from ddfbench.ddf_fused import FusedMLP
+    from ddfbench.models.ddf.fused import FusedMLP
 
     rep = random_rep(*shape)
     o, d = rays(1000)  # not a multiple of the block: the last block is masked
@@ -147,7 +147,7 @@ def test_fused_depth_answers_like_the_bf16_depth():
     """DDFDepth(fused) against DDFDepth(bf16 autocast) of the same network: same hits, close depths."""
     if not needs_a_kernel_runner("test_fused_depth_answers_like_the_bf16_depth"):
         return
-    from ddfbench.ddf_infer import DDFDepth
+    from ddfbench.models.ddf.infer import DDFDepth
 
     rep = random_rep(128, 4, 5, 1, {})
     o, d = rays(3000, seed=2)
@@ -168,7 +168,7 @@ def test_one_kernel_depth_answers_like_the_fused_mlp_between_torch_passes(shape)
     meet it, 10-90 % of them hits."""
     if not needs_a_kernel_runner(f"test_one_kernel_depth_answers_like_the_fused_mlp_between_torch_passes[{IDS[NETWORKS.index(shape)]}]"):
         return
-    from ddfbench.ddf_infer import DDFDepth
+    from ddfbench.models.ddf.infer import DDFDepth
 
     o, d = box_rays(1500, seed=3)
     rep = responsive(random_rep(*shape), o, d)
@@ -198,8 +198,8 @@ def test_one_kernel_depth_keeps_the_box_and_hit_rule(param):
         return
     import numpy as np
 
-    from ddfbench.ddf_fused import FusedDepth
-    from ddfbench.geometry import box_entry
+    from ddfbench.core.geometry import box_entry
+    from ddfbench.models.ddf.fused import FusedDepth
 
     rep = random_rep(64, 2, 3, 1, {"param": param})
     with torch.no_grad():
@@ -233,8 +233,8 @@ def test_one_kernel_depth_keeps_the_box_and_hit_rule(param):
 
 
 def test_what_is_not_fused_is_refused():
-    from ddfbench.ddf_fused import FusedDepth, FusedMLP, supported, supported_depth
-    from ddfbench.ddf_infer import DDFDepth
+    from ddfbench.models.ddf.fused import FusedDepth, FusedMLP, supported, supported_depth
+    from ddfbench.models.ddf.infer import DDFDepth
 
     base = model_preset("ddf_tuned")
     assert supported(DDF(base).net) is None

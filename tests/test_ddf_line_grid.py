@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 import torch
 
-from ddfbench.errors import InputError
+from ddfbench.core.errors import InputError
 from ddfbench.models.ddf import DDF
 from ddfbench.models.ddf.line_grid import LineGrid
 from ddfbench.models.ddf.network import DDFNet, checked_config

@@ -1,4 +1,4 @@
-"""`python -m ddfbench.edge_error`: where a run's depth and mask errors lie, by distance to the edges of
+"""`python -m ddfbench.report.edge_error`: where a run's depth and mask errors lie, by distance to the edges of
 the oracle's frame. Edges are found at mask changes and depth steps above the jump, not on a ramp;
 bands follow the Euclidean distance in pixels; errors placed on known pixels land in their bands;
 on a real run the pooled figures equal the record's own image metrics, and a run without renders is
@@ -15,8 +15,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from ddfbench.edge_error import BANDS, band_counts, bands, edge_pixels, figures, main
-from ddfbench.runs import find_records
+from ddfbench.report.edge_error import BANDS, band_counts, bands, edge_pixels, figures, main
+from ddfbench.run.runs import find_records
 
 BAND = {name: i for i, (name, _) in enumerate(BANDS)}
 
@@ -105,7 +105,7 @@ def test_a_real_runs_pooled_figures_are_its_records_image_metrics_and_a_run_with
     with open(os.path.join(twin, "record.json"), "w") as fh:
         json.dump({**{k: v for k, v in rec.items() if k != "_dir"}, "key": "twin"}, fh)
     assert main([str(tmp_path / "single"), "--out", str(tmp_path / "edges")]) == 1
-    err = [line for line in capsys.readouterr().err.splitlines() if line.startswith("ddfbench.edge_error")]
+    err = [line for line in capsys.readouterr().err.splitlines() if line.startswith("ddfbench.report.edge_error")]
     assert len(err) == 1 and twin in err[0] and "cam0_mask.npy: missing" in err[0]
     table = pd.read_csv(tmp_path / "edges" / "table.csv")
     assert set(table["key"]) == {rec["key"]} and list(table["band"]) == [name for name, _ in BANDS]
@@ -120,12 +120,12 @@ def test_a_bad_jump_and_a_folder_without_records_are_one_line_errors(tmp_path, c
     assert main([str(tmp_path), "--out", str(tmp_path / "o"), "--jump", "0"]) == 2
     assert main([str(tmp_path), "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err.splitlines()
-    assert err[0].startswith("ddfbench.edge_error: --jump 0") and "no finished run records" in err[1]
+    assert err[0].startswith("ddfbench.report.edge_error: --jump 0") and "no finished run records" in err[1]
     assert not (tmp_path / "o").exists()
 
 
 def test_the_table_pools_seeds_and_says_where_fewer_runs_define_a_figure():
-    from ddfbench.edge_error import COLUMNS, to_markdown
+    from ddfbench.report.edge_error import COLUMNS, to_markdown
 
     run = {key: 0.5 for key, _, _ in COLUMNS}
     runs = pd.DataFrame([{"model": "m", "shape": "s", "capacity": "c1", **run, "depth_mae_far": math.nan, "no_result": False},

@@ -13,12 +13,13 @@ import matplotlib.image
 import pandas as pd
 import pytest
 
-from ddfbench import CONF_DIR, plugins
+from ddfbench.core import plugins
+from ddfbench.core.errors import InputError
+from ddfbench.core.plugins import CONF_DIR
+from ddfbench.models import load_family
 from ddfbench.report.plots import PLOTS_BY_EXPERIMENT
 from ddfbench.report.status import expected_grid
-from ddfbench.errors import InputError
-from ddfbench.models import load_family
-from ddfbench.runs import RECORD_FIELDS, find_records
+from ddfbench.run.runs import RECORD_FIELDS, find_records
 
 FAMILIES = set(plugins.members("model", "smoke"))  # every model with a smoke level (the ddf_paper preset included)
 SAMPLERS = set(plugins.members("sampling", "smoke"))
@@ -136,7 +137,6 @@ def test_levels_of_takes_another_configs_levels_and_refuses_a_bad_reference():
 def test_gan_sdf_levels_set_its_fit_steps_and_others_keep_their_models(experiment):
     """The GAN's network is fixed: its capacity level is train.max_steps, taken from the level's row."""
     from hydra import compose, initialize_config_dir
-
     from omegaconf import OmegaConf
 
     with initialize_config_dir(CONF_DIR, version_base="1.3"):
@@ -230,7 +230,7 @@ def test_a_level_the_model_lacks_is_a_failed_record_with_one_line_not_a_crash(tm
     from hydra import compose, initialize_config_dir
     from omegaconf import OmegaConf
 
-    from ddfbench import runner
+    from ddfbench.run import runner
 
     with initialize_config_dir(CONF_DIR, version_base="1.3"):
         cfg = compose("config", overrides=["+experiment=pareto", "model=ddf", "capacity=c1", f"out_dir={tmp_path}"])

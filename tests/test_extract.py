@@ -4,9 +4,10 @@ import numpy as np
 import pytest
 import torch
 
-from ddfbench.errors import InputError
-from ddfbench import extract
-from ddfbench.extract import banded_grid, field_to_mesh, grid_points, sdf_to_mesh, udf_to_mesh
+from ddfbench.core.errors import InputError
+from ddfbench.core.geometry import grid_points
+from ddfbench.evaluate import extract
+from ddfbench.evaluate.extract import banded_grid, field_to_mesh, sdf_to_mesh, udf_to_mesh
 
 R0 = 0.4
 

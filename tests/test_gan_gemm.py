@@ -3,7 +3,8 @@
 import pytest
 import torch
 
-from ddfbench.models import _gan_gemm as gan_gemm, load_family
+from ddfbench.models import _gan_gemm as gan_gemm
+from ddfbench.models import load_family
 from ddfbench.models.gan_sdf import discriminator, generator
 
 

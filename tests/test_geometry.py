@@ -1,4 +1,4 @@
-"""ddfbench.geometry: the one ray-box test (numpy and torch alike, the in-face case an interval),
+"""ddfbench.core.geometry: the one ray-box test (numpy and torch alike, the in-face case an interval),
 the one pinhole camera, the one positional encoding."""
 
 import math
@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 import torch
 
-from ddfbench.geometry import BOX_HALF, FourierFeatures, box_entry, pinhole_rays, ray_box
+from ddfbench.core.geometry import BOX_HALF, FourierFeatures, box_entry, pinhole_rays, ray_box
 from ddfbench.sampling.directions import uniform_directions
 
 
@@ -107,6 +107,6 @@ def test_fourier_features_layout():
 def test_the_configs_field_box_is_box_half():
     from omegaconf import OmegaConf
 
-    from ddfbench import CONF_DIR
+    from ddfbench.core.plugins import CONF_DIR
 
     assert OmegaConf.load(f"{CONF_DIR}/config.yaml").domain == BOX_HALF

@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 import torch
 
-from ddfbench.shapes import load_shape
 from ddfbench.bench.views import incoherent_rays, view_rays
+from ddfbench.truth.shapes import load_shape
 from tests.hard_cases.conftest import ORACLE_BACKEND, compose, has_family, has_warp
 
 DEVICE = os.environ.get("DDFBENCH_GPU_TEST_DEVICE", "cuda")
@@ -97,7 +97,7 @@ def test_ddf_device_depth_in_reduced_precision_and_compiled(fits):
     """ddf_infer.DDFDepth on the device: fp32 equals DDF.intersect; bf16, compiled bf16 and the fused MLP stay close to it."""
     if "ddf" not in fits:
         pytest.skip("no ddf family")
-    from ddfbench.ddf_infer import DDFDepth
+    from ddfbench.models.ddf.infer import DDFDepth
 
     rep = fits["ddf"].to(DEVICE)
     o, d = rays()
@@ -123,7 +123,7 @@ def test_ddf_device_depth_in_reduced_precision_and_compiled(fits):
 
 def test_warp_caster_on_the_device_equals_the_cpu():
     pytest.importorskip("warp", reason='NVIDIA Warp not installed (pip install -e ".[gpu]")')
-    from ddfbench.warp_cast import WarpCaster
+    from ddfbench.truth.warp_cast import WarpCaster
 
     mesh = load_shape({"name": "bunny"}).mesh
     o, d = incoherent_rays(100_000, seed=4)
@@ -138,7 +138,7 @@ def test_warp_caster_on_the_device_equals_the_cpu():
 @pytest.mark.parametrize("family", [f for f in ("ddf", "neural_sdf", "grid_sdf", "gan_sdf", "mesh") if has_family(f)])
 def test_run_end_to_end_on_the_device(family, tmp_path):
     """train.device=<device>: fit, extract, render and score a run; its depth images hold no NaN."""
-    from ddfbench.runner import run
+    from ddfbench.run.runner import run
 
     extra = (["model.backend=warp"] if family == "mesh" and has_warp() else []) + [f"oracle.backend={ORACLE_BACKEND}"]
     rec = run(compose(f"model={family}", "shape=sphere", "scene=depth", f"train.device={DEVICE}",

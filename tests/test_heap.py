@@ -1,4 +1,4 @@
-"""ddfbench.heap keeps freed multi-MB blocks in the heap: a 24 MiB tensor is not mmapped after the call."""
+"""ddfbench.core.heap keeps freed multi-MB blocks in the heap: a 24 MiB tensor is not mmapped after the call."""
 
 import os
 import platform
@@ -9,7 +9,7 @@ import pytest
 
 _SCRIPT = """
 import ctypes, sys, torch
-from ddfbench.heap import keep_freed_blocks
+from ddfbench.core.heap import keep_freed_blocks
 class Info(ctypes.Structure):
     _fields_ = [(n, ctypes.c_size_t) for n in
                 "arena ordblks smblks hblks hblkhd usmblks fsmblks uordblks fordblks keepcost".split()]

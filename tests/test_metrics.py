@@ -3,8 +3,8 @@
 import numpy as np
 import trimesh
 
-from ddfbench import metrics
-from ddfbench.metric_registry import PENALTY_DISTANCE
+from ddfbench.evaluate import metrics
+from ddfbench.evaluate.metric_registry import PENALTY_DISTANCE
 
 
 def pairwise_sq(a, b):

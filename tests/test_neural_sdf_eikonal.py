@@ -3,11 +3,11 @@
 import numpy as np
 import torch
 
+from ddfbench.core.representation import Budget, FitData
 from ddfbench.models import load_family, neural_sdf
-from ddfbench.oracle import Oracle
-from ddfbench.representation import Budget, FitData
-from ddfbench.shapes import load_shape
 from ddfbench.sampling.oracle_sdf import oracle_sdf_samples
+from ddfbench.truth.oracle import Oracle
+from ddfbench.truth.shapes import load_shape
 
 DOMAIN = 0.6
 NET = {"width": 32, "depth": 2, "n_harmonics": 2, "batch": 1024, "lr": 3e-3, "lr_schedule": "constant"}

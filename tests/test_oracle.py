@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from ddfbench.oracle import Oracle
-from ddfbench.shapes import load_shape
+from ddfbench.truth.oracle import Oracle
+from ddfbench.truth.shapes import load_shape
 from tests.conftest import random_rays
 from tests.hard_cases.conftest import backend_params, has_warp
 
@@ -101,10 +101,10 @@ def test_warp_backend_without_warp_names_the_install(monkeypatch):
     """Where the `gpu` extra is missing, choosing the warp backend is a one-line error with the install command."""
     import sys
 
-    from ddfbench.errors import InputError
+    from ddfbench.core.errors import InputError
 
     monkeypatch.setitem(sys.modules, "warp", None)  # import warp -> ImportError
-    monkeypatch.delitem(sys.modules, "ddfbench.warp_cast", raising=False)
+    monkeypatch.delitem(sys.modules, "ddfbench.truth.warp_cast", raising=False)
     with pytest.raises(InputError, match=r'pip install -e "\.\[gpu\]"') as err:
         Oracle(load_shape({"name": "cube"}).mesh, "warp")
     assert "\n" not in str(err.value)
@@ -136,13 +136,13 @@ def test_warp_oracle_needs_no_open3d(tmp_path):
     script = (
         "import sys; sys.modules['open3d'] = None\n"
         "import numpy as np\n"
-        "from ddfbench.oracle import Oracle\n"
-        "from ddfbench.shapes import load_shape\n"
+        "from ddfbench.truth.oracle import Oracle\n"
+        "from ddfbench.truth.shapes import load_shape\n"
         "orc = Oracle(load_shape({'name': 'sphere'}).mesh, 'warp')\n"
         "p = np.array([[0.0, 0.0, 0.0], [0.9, 0.0, 0.0]]); d = np.array([[1.0, 0.0, 0.0]] * 2)\n"
         "print(orc.signed_distance(p).astype(float).round(2).tolist(), orc.hit_distance(p, d).astype(float).round(2).tolist(),\n"
         "      orc.count_crossings(p - [[1.0, 0, 0]], d).tolist(), orc.any_hit(p, d).tolist())\n"
-        "from ddfbench.errors import InputError\n"
+        "from ddfbench.core.errors import InputError\n"
         "for backend, query in (('open3d', 'hit_distance'), ('embree', 'count_crossings')):\n"
         "    try:\n"
         "        getattr(Oracle(orc.mesh, backend), query)(p, d)\n"
@@ -159,7 +159,7 @@ def test_warp_oracle_needs_no_open3d(tmp_path):
 def test_embree_pool_equals_the_embree_oracle(bunny, rng):
     """embreex in worker processes (Embree on every core without open3d) gives the single-process answers, the
     empty call included; the pool is built with every worker started (3 workers on 2 cores)."""
-    from ddfbench.embree_pool import EmbreePool
+    from ddfbench.truth.embree_pool import EmbreePool
 
     o, d = random_rays(rng, 20001)
     pool = EmbreePool(bunny.mesh, workers=3)

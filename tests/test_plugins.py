@@ -15,12 +15,13 @@ import sys
 import pandas as pd
 import pytest
 
-from ddfbench import CONF_DIR, plugins
-from ddfbench.errors import InputError
+from ddfbench.core import plugins
+from ddfbench.core.errors import InputError
+from ddfbench.core.plugins import CONF_DIR
 from ddfbench.models import load_family
-from ddfbench.runs import find_records
+from ddfbench.run.runs import find_records
 
-PACKAGE_DIR = os.path.dirname(os.path.dirname(os.path.abspath(plugins.__file__)))
+PACKAGE_DIR = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(plugins.__file__))))
 
 
 def test_family_config_is_the_yaml_overlaid_and_rejects_unknown_keys():
@@ -79,7 +80,7 @@ def test_a_copied_family_and_sampler_join_the_experiments_and_the_report(tmp_pat
     root = tmp_path / "tree"
     _copy_tree(root)
     env = dict(os.environ, PYTHONPATH=str(root), PYTHONUNBUFFERED="1")
-    probe = ("import json; from ddfbench import plugins; from ddfbench.report.status import expected_grid as g;"
+    probe = ("import json; from ddfbench.core import plugins; from ddfbench.report.status import expected_grid as g;"
              "e = ['default', 'representations', 'render_time', 'pareto', 'storage', 'smoke'];"
              "print(json.dumps({'models': {x: plugins.members('model', x) for x in e},"
              " 'samplers': plugins.members('sampling', 'sampling'),"
@@ -134,7 +135,7 @@ def test_a_copied_family_and_sampler_join_the_experiments_and_the_report(tmp_pat
 
 def _plot_legends(records_dir, env, root):
     """{plot kind: legend labels} of the smoke report's plots, drawn in the copied tree."""
-    script = ("import json, sys; from ddfbench.report import plots; from ddfbench.runs import find_records\n"
+    script = ("import json, sys; from ddfbench.report import plots; from ddfbench.run.runs import find_records\n"
               "seen = {}\n"
               "def keep(fig, out_dir, name):\n"
               "    seen[name] = [t.get_text() for ax in fig.axes if ax.get_legend() for t in ax.get_legend().get_texts()]\n"

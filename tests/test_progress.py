@@ -8,7 +8,7 @@ import sys
 
 import pytest
 
-from ddfbench import progress
+from ddfbench.run import progress
 
 LINE = re.compile(r"^\[(\d+)/(\d+)\] (\S+) (\S+) (ok|failed)  .*elapsed \d+:\d\d(  eta \d+:\d\d)?$")
 

@@ -1,4 +1,4 @@
-"""`python -m ddfbench.reevaluate`: a finished sweep measured again from its saved artifacts. At the
+"""`python -m ddfbench.report.reevaluate`: a finished sweep measured again from its saved artifacts. At the
 record's own point count, seed and scene it reproduces the record's geometry and image metrics (so it
 reads the right meshes and loads the right networks); another point count is another measurement; an
 unreadable run is one line and the others are still written; records stay unchanged."""
@@ -11,8 +11,8 @@ import sys
 import pandas as pd
 import pytest
 
-from ddfbench.reevaluate import main
-from ddfbench.runs import find_records
+from ddfbench.report.reevaluate import main
+from ddfbench.run.runs import find_records
 
 RUN = ["-m", "model=grid_sdf,neural_sdf", "shape=sphere", "eval=smoke", "eval.n_points=2000",
        "eval.mesh_resolution=20", "scene=depth", "scene.width=24", "scene.height=24", "sampling=random",
@@ -65,7 +65,7 @@ def test_reevaluation_at_the_records_settings_reproduces_them(tmp_path, capsys):
     os.remove(os.path.join(gone["_dir"], gone["artifacts"]["model"]))
     capsys.readouterr()
     assert main([str(tmp_path / "single"), "--out", str(tmp_path / "re_gone"), "--n-points", "500", *scene]) == 1
-    err = [line for line in capsys.readouterr().err.splitlines() if line.startswith("ddfbench.reevaluate")]
+    err = [line for line in capsys.readouterr().err.splitlines() if line.startswith("ddfbench.report.reevaluate")]
     assert len(err) == 1 and gone["_dir"] in err[0] and "no model artifact" in err[0]
     assert len(pd.read_csv(tmp_path / "re_gone" / "runs.csv")) == 3
     assert main([str(tmp_path / "nothing"), "--out", str(tmp_path / "x")]) == 2
@@ -97,7 +97,7 @@ def test_a_float16_run_measures_its_rounded_network_as_store_as_float16_measures
     assert len(rows) == 2 and all(row[1] == "2" for row in rows)  # chamfer and F@0.01, 2 pairs each
     capsys.readouterr()  # a float16 record cannot be stored as float32: its rounding stays
     assert main([str(tmp_path / "single"), "--out", str(tmp_path / "w"), "--model", "ddf", "--store-as", "float32"]) == 1
-    err = [line for line in capsys.readouterr().err.splitlines() if line.startswith("ddfbench.reevaluate")]
+    err = [line for line in capsys.readouterr().err.splitlines() if line.startswith("ddfbench.report.reevaluate")]
     assert len(err) == 1 and runs["float16"]["_dir"] in err[0] and "stored as float16 already" in err[0]
     grid = subprocess.run([sys.executable, "-m", "ddfbench", *RUN[:1], "model=grid_sdf", *RUN[2:],
                            f"out_dir={tmp_path}"], capture_output=True, text=True, timeout=600)
@@ -105,5 +105,5 @@ def test_a_float16_run_measures_its_rounded_network_as_store_as_float16_measures
     capsys.readouterr()
     assert main([str(tmp_path / "single"), "--out", str(tmp_path / "g"), "--model", "grid_sdf", "--store-as",
                  "float16"]) == 1
-    err = [line for line in capsys.readouterr().err.splitlines() if line.startswith("ddfbench.reevaluate")]
+    err = [line for line in capsys.readouterr().err.splitlines() if line.startswith("ddfbench.report.reevaluate")]
     assert len(err) == 1 and "family grid_sdf has no storage_dtype" in err[0]

@@ -12,8 +12,9 @@ from hydra import compose, initialize_config_dir
 from omegaconf import OmegaConf
 from PIL import Image
 
-from ddfbench.errors import InputError
-from ddfbench.geometry import BOX_HALF
+from ddfbench.core.errors import InputError
+from ddfbench.core.geometry import BOX_HALF
+from ddfbench.core.representation import Hits, RayStatus, Representation
 from ddfbench.render import mesh_reference, render_scene
 from ddfbench.render.camera import Camera, orbit_cameras
 from ddfbench.render.compare import PSNR_CAP, image_metrics
@@ -22,7 +23,6 @@ from ddfbench.render.images import write_png
 from ddfbench.render.integrator import Frames, primary_rays, render
 from ddfbench.render.scene import parse_scene, plan_passes
 from ddfbench.render.timing import time_renders
-from ddfbench.representation import Hits, RayStatus, Representation
 
 SCENE_DIR = os.path.join(os.path.dirname(__file__), "..", "conf", "scene")
 PRESETS = ("depth", "normals", "shaded", "path", "paper_fig4")

@@ -14,7 +14,7 @@ from hypothesis import strategies as st
 
 from ddfbench.report import plots, records, tables
 from ddfbench.report.__main__ import main as report_main
-from ddfbench.runs import write_json_atomic
+from ddfbench.run.runs import write_json_atomic
 
 
 def make_record(model="ddf", shape="bunny", seed=0, chamfer=1e-3, status="ok", overrides=(), sampling=None,
@@ -158,8 +158,8 @@ def test_ci_is_a_t_interval_over_seeds():
 
 
 def test_a_new_metric_declaration_reaches_the_table_with_its_empty_penalty(monkeypatch):
-    from ddfbench import metric_registry
-    from ddfbench.metrics import penalty_metrics
+    from ddfbench.evaluate import metric_registry
+    from ddfbench.evaluate.metrics import penalty_metrics
 
     new = metric_registry.Metric("hausdorff", ("metrics", "hausdorff"), "Hausdorff ×10³", 1e3, penalty=7.5)
     monkeypatch.setattr(metric_registry, "METRICS", [*metric_registry.METRICS, new])

@@ -6,7 +6,7 @@ import sys
 
 import pytest
 
-from ddfbench.runs import find_records
+from ddfbench.run.runs import find_records
 
 FAMILIES = ("mesh", "grid_sdf", "neural_sdf", "ddf", "gan_sdf")  # deterministic on one CPU thread
 BUILT = ("mesh", "grid_sdf")  # built from the exact mesh, not trained

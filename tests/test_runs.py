@@ -3,7 +3,7 @@
 import json
 import os
 
-from ddfbench import runs
+from ddfbench.run import runs
 
 
 def base_cfg():
@@ -71,8 +71,8 @@ def test_environment_records_optional_package_versions_whatever_was_imported(mon
     __version__, open3d installs as open3d-cpu); a blocked import (a machine without it) records None."""
     import sys
 
-    from ddfbench.runs import OPTIONAL, environment
-    from ddfbench.shapes import load_shape
+    from ddfbench.run.runs import OPTIONAL, environment
+    from ddfbench.truth.shapes import load_shape
 
     load_shape({"name": "bone"})  # imports pymeshlab, whose module has no __version__
     versions = environment("cpu", 1)["versions"]
@@ -83,7 +83,7 @@ def test_environment_records_optional_package_versions_whatever_was_imported(mon
 
 def test_a_copied_tree_names_its_commit_through_the_environment(monkeypatch):
     """A lent GPU machine gets the working tree over a stale .git (or none): $DDFBENCH_GIT_SHA names the commit."""
-    from ddfbench import runs
+    from ddfbench.run import runs
 
     monkeypatch.setattr(runs, "_git", lambda *args: "stale")
     monkeypatch.delenv(runs.GIT_SHA_ENV, raising=False)

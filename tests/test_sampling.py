@@ -6,17 +6,16 @@ import numpy as np
 import pytest
 import trimesh
 
-from ddfbench import plugins
-from ddfbench.errors import InputError
-from ddfbench.oracle import Oracle
-from ddfbench.samples import Samples
+from ddfbench.core import plugins
+from ddfbench.core.errors import InputError
 from ddfbench.sampling import available_strategies, build
 from ddfbench.sampling.collect import Collector
 from ddfbench.sampling.directions import paper_eq10_directions, random_perpendicular, uniform_directions
+from ddfbench.sampling.samples import Samples
 from ddfbench.sampling.steps import marching_distances
 from ddfbench.sampling.triangles import barycentric, face_plan
-from ddfbench.shapes import Shape, load_shape
-
+from ddfbench.truth.oracle import Oracle
+from ddfbench.truth.shapes import Shape, load_shape
 
 
 def config(strategy, **overrides):

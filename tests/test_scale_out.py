@@ -12,11 +12,11 @@ import time
 import pytest
 import trimesh
 
-from ddfbench.errors import InputError
-from ddfbench.launch import available_cores, job_device, job_settings, job_threads
+from ddfbench.core.errors import InputError
 from ddfbench.report.__main__ import main as report_main
 from ddfbench.report.status import format_status, sweep_status
-from ddfbench.runs import RECORD_FIELDS, find_records
+from ddfbench.run.launch import available_cores, job_device, job_settings, job_threads
+from ddfbench.run.runs import RECORD_FIELDS, find_records
 
 # The smoke experiment's sizes (sphere, tiny samples and metrics) on a grid of its own: two mesh models x
 # two sampling strategies. The learned families stop on a wall-clock budget, so only deterministic

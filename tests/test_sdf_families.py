@@ -9,15 +9,15 @@ import numpy as np
 import pytest
 import torch
 
-from ddfbench import levelset
-from ddfbench.errors import InputError
-from ddfbench.extract import grid_points
+from ddfbench.core.errors import InputError
+from ddfbench.core.geometry import grid_points
+from ddfbench.core.representation import Budget, FitData, RayStatus
 from ddfbench.models import load_family
 from ddfbench.models.neural_sdf import clamped_l1
-from ddfbench.oracle import Oracle
-from ddfbench.representation import Budget, FitData, RayStatus
-from ddfbench.shapes import load_shape
 from ddfbench.sampling.oracle_sdf import oracle_sdf_samples
+from ddfbench.truth import levelset
+from ddfbench.truth.oracle import Oracle
+from ddfbench.truth.shapes import load_shape
 
 RADIUS = 0.5  # the catalog sphere, normalized: an icosphere of radius 0.5 (faceted: gaps below 4e-4)
 DOMAIN = 0.6

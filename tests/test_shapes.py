@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 import trimesh
 
-from ddfbench.errors import InputError
-from ddfbench.shapes import PYMESHLAB_SAMPLES, catalog, load_shape
+from ddfbench.core.errors import InputError
+from ddfbench.truth.shapes import PYMESHLAB_SAMPLES, catalog, load_shape
 
 
 def load_file(path):
@@ -114,8 +114,8 @@ def test_sample_meshes_from_a_copy_without_pymeshlab(tmp_path, monkeypatch):
     import shutil
     import sys
 
-    from ddfbench.catalog import SAMPLES_ENV, pymeshlab_samples_dir
     from ddfbench.models.mesh import decimate
+    from ddfbench.truth.catalog import SAMPLES_ENV, pymeshlab_samples_dir
 
     shutil.copy(os.path.join(pymeshlab_samples_dir(), PYMESHLAB_SAMPLES["bone"]), tmp_path / "bone.ply")
     monkeypatch.setenv(SAMPLES_ENV, str(tmp_path))

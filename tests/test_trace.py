@@ -4,10 +4,17 @@ import numpy as np
 import pytest
 import torch
 
-from ddfbench.errors import InputError
-from ddfbench.representation import RayStatus
-from ddfbench.trace import (TraceOptions, autograd_normals, central_difference_normals, numpy_field,
-                            sphere_trace, to_hits)
+from ddfbench.core import plugins
+from ddfbench.core.errors import InputError
+from ddfbench.core.representation import RayStatus
+from ddfbench.evaluate.trace import (
+    TraceOptions,
+    autograd_normals,
+    central_difference_normals,
+    numpy_field,
+    sphere_trace,
+    to_hits,
+)
 
 R = 0.4
 DOMAIN = 0.6
@@ -239,6 +246,9 @@ def test_bad_options_are_input_errors():
     o, d = random_rays(2, 0)
     with pytest.raises(InputError, match="omega"):
         sphere_trace(sphere, o, d, DOMAIN, TraceOptions(omega=2.5))
+    declared = plugins.defaults("model", "neural_sdf")["trace"]
     with pytest.raises(InputError, match="unknown"):
-        TraceOptions.from_cfg({"trace": {"omgea": 1.5}})
-    assert TraceOptions.from_cfg({"trace": {"omega": 1.5, "max_steps": 64}}).max_steps == 64
+        TraceOptions.from_cfg({"trace": {**declared, "omgea": 1.5}})
+    with pytest.raises(InputError, match=r"^model\.trace\.omega: missing"):
+        TraceOptions.from_cfg({"trace": {k: v for k, v in declared.items() if k != "omega"}})
+    assert TraceOptions.from_cfg({"trace": {**declared, "omega": 1.5, "max_steps": 64}}).max_steps == 64

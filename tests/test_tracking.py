@@ -9,9 +9,10 @@ import pytest
 from hydra import compose, initialize_config_dir
 from omegaconf import OmegaConf
 
-from ddfbench import CONF_DIR, runner, runs
+from ddfbench.core.plugins import CONF_DIR
 from ddfbench.report.export_mlflow import export
-from ddfbench.tracking import KEY_TAG, default_uri, log_record
+from ddfbench.run import runner, runs
+from ddfbench.run.tracking import KEY_TAG, default_uri, log_record
 
 mlflow = pytest.importorskip("mlflow", reason='the tracking extra is not installed (pip install -e ".[tracking]")')
 
@@ -83,7 +84,7 @@ def test_unreachable_server_leaves_the_run_ok_with_one_warning(tmp_path, caplog)
         rec = runner.run(_cfg(tmp_path, "model=mesh", "tracking=mlflow", f"tracking.uri={uri}", "scene=none"))
     assert rec["status"] == "ok"
     assert runs.is_done(runs.record_path(str(tmp_path), "single", rec["key"]))
-    warnings = [r for r in caplog.records if r.levelno >= logging.WARNING and r.name == "ddfbench.tracking"]
+    warnings = [r for r in caplog.records if r.levelno >= logging.WARNING and r.name == "ddfbench.run.tracking"]
     assert len(warnings) == 1 and uri in warnings[0].getMessage()
 
 

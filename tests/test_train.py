@@ -5,9 +5,9 @@ import time
 import pytest
 import torch
 
-from ddfbench.errors import InputError
-from ddfbench.representation import Budget
-from ddfbench.train import Schedule, probe_fractions, resolve_device, seed_everything, train_loop
+from ddfbench.core.errors import InputError
+from ddfbench.core.representation import Budget
+from ddfbench.fit.train import Schedule, probe_fractions, resolve_device, seed_everything, train_loop
 
 
 def regression(seed=0):
@@ -105,7 +105,7 @@ def test_schedule_factors_and_lr_applied():
     with pytest.raises(InputError):
         Schedule("linear")
     with pytest.raises(InputError):
-        Schedule.from_cfg({"lr_final_ratio": 0})
+        Schedule.from_cfg({"lr_schedule": "cosine", "lr_final_ratio": 0, "lr_warmup": 0.0})
 
 
 def test_seeded_runs_are_identical():

@@ -8,10 +8,11 @@ import sys
 import pandas as pd
 import pytest
 
-from ddfbench import plugins, tune
-from ddfbench.errors import InputError
-from ddfbench.metric_registry import by_name, objective_value
-from ddfbench.runs import find_records
+from ddfbench.core import plugins
+from ddfbench.core.errors import InputError
+from ddfbench.evaluate.metric_registry import by_name, objective_value
+from ddfbench.fit import tune
+from ddfbench.run.runs import find_records
 
 optuna = pytest.importorskip("optuna", reason="the `tune` extra (hydra-optuna-sweeper) is not installed")
 

@@ -8,11 +8,11 @@ import time
 
 import pytest
 
-from ddfbench.worker_guard import watch_launcher
+from ddfbench.run.worker_guard import watch_launcher
 
 SWEEP = """
 import multiprocessing, sys, time
-from ddfbench.worker_guard import watch_launcher
+from ddfbench.run.worker_guard import watch_launcher
 
 def job(out):
     with open(out, "w") as fh:

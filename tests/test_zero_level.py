@@ -1,4 +1,4 @@
-"""`python -m ddfbench.zero_level`: where a finished SDF run's zero level lies against the true surface.
+"""`python -m ddfbench.report.zero_level`: where a finished SDF run's zero level lies against the true surface.
 A grid SDF built from the exact sphere has its zero level on the surface; the same grid shifted by c
 reads an offset of c (inside: positive), and extracting at the median level recovers the unshifted
 mesh; runs of other families are left out; the GAN's target scale changes its values and slopes,
@@ -14,8 +14,8 @@ import pytest
 import torch
 
 from ddfbench.models.gan_sdf import GanSDF
-from ddfbench.runs import find_records
-from ddfbench.zero_level import main, offsets, value_and_slope
+from ddfbench.report.zero_level import main, offsets, value_and_slope
+from ddfbench.run.runs import find_records
 
 RUN = ["shape=sphere", "eval=smoke", "eval.n_points=2000", "eval.mesh_resolution=24", "sampling=random",
        "sampling.n_samples=2000", "train.budget=steps", "train.max_steps=1", "threads=1", "quiet=true", "seed=3"]
@@ -35,7 +35,7 @@ def test_zero_level_reads_a_shifted_grid_as_an_offset_and_extracting_at_its_leve
     recs = {r["model"]: r for r in find_records(str(tmp_path / "single"))}
     grid = recs["grid_sdf"]
     assert main([str(tmp_path / "single"), "--out", str(tmp_path / "z0"), "--n-points", "3000", "--threads", "1"]) == 0
-    assert not [line for line in capsys.readouterr().err.splitlines() if line.startswith("ddfbench.zero_level")]
+    assert not [line for line in capsys.readouterr().err.splitlines() if line.startswith("ddfbench.report.zero_level")]
     table = pd.read_csv(tmp_path / "z0" / "table.csv")
     assert list(table["model"]) == ["grid_sdf"]  # the mesh run is left out, and said so
     assert "1 SDF runs (0 unreadable, 1 of other families left out)" in (tmp_path / "z0" / "table.md").read_text()

@@ -22,15 +22,15 @@ import time
 import torch
 import yaml
 
-from ddfbench import heap
 from ddfbench.bench import CUDA_ONLY_BY_DEFAULT, SECTIONS
 from ddfbench.bench.context import Context
 from ddfbench.bench.results import SectionResult
 from ddfbench.bench.sizes import SIZES
 from ddfbench.bench.table import to_markdown, write
-from ddfbench.errors import InputError, one_line
-from ddfbench.runs import environment
-from ddfbench.train import resolve_device
+from ddfbench.core import heap
+from ddfbench.core.errors import InputError, one_line
+from ddfbench.fit.train import resolve_device
+from ddfbench.run.runs import environment
 
 
 def parse_sections(text: str) -> list[str]:
@@ -124,7 +124,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.threads:
         torch.set_num_threads(args.threads)
     threads = torch.get_num_threads()
-    heap_kept = heap.keep_freed_blocks()  # as a run sets it (ddfbench.runner)
+    heap_kept = heap.keep_freed_blocks()  # as a run sets it (ddfbench.run.runner)
     started, t0 = dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds"), time.perf_counter()
     load = round(os.getloadavg()[0], 2) if hasattr(os, "getloadavg") else None
     results: dict[str, SectionResult] = {}

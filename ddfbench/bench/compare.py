@@ -20,7 +20,7 @@ from dataclasses import dataclass
 from typing import Sequence
 
 from ddfbench.bench.table import number
-from ddfbench.errors import InputError
+from ddfbench.core.errors import InputError
 
 SAME = (("options", "device"), ("options", "sizes"), ("env", "threads"))  # what every compared run must share
 

@@ -7,13 +7,13 @@ from typing import Any
 
 from omegaconf import OmegaConf
 
-from ddfbench import plugins
 from ddfbench.bench.results import SectionResult
-from ddfbench.geometry import BOX_HALF
-from ddfbench.oracle import Oracle
-from ddfbench.representation import Budget, FitData, Representation
-from ddfbench.samples import Samples
-from ddfbench.shapes import Shape, load_shape
+from ddfbench.core import plugins
+from ddfbench.core.geometry import BOX_HALF
+from ddfbench.core.representation import Budget, FitData, Representation
+from ddfbench.sampling.samples import Samples
+from ddfbench.truth.oracle import Oracle
+from ddfbench.truth.shapes import Shape, load_shape
 
 DOMAIN = BOX_HALF  # conf/config.yaml `domain`: half-side of the field box
 

@@ -21,10 +21,10 @@ import torch
 from ddfbench.bench.context import DOMAIN, Context, preset
 from ddfbench.bench.results import SectionResult, Target, compare
 from ddfbench.bench.timing import measure_side_by_side, precisions
-from ddfbench.geometry import box_entry
+from ddfbench.bench.views import view_rays
+from ddfbench.core.geometry import box_entry
 from ddfbench.models.ddf import DDF
 from ddfbench.render import mesh_reference
-from ddfbench.bench.views import view_rays
 
 TARGET = Target(">=", 0.8)
 ALL_HIT_BIAS = 20.0  # visibility logit bias: sigmoid(20) = 1 - 2e-9

@@ -20,7 +20,7 @@ import sys
 from ddfbench.bench.context import Context
 from ddfbench.bench.results import SectionResult, compare
 from ddfbench.bench.timing import once
-from ddfbench.runs import find_records
+from ddfbench.run.runs import find_records
 
 REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 

@@ -4,7 +4,7 @@ Where the fused DDF's time goes (issue 17's 1e9 rays/s goal). On one device, in 
 warm-up excluded, medians; ddfbench.bench.timing), for the ddf_tuned network with random weights (the time
 does not depend on them) on N incoherent rays, it times:
 - `encode`: the compiled box entry + encoding pass before the kernel (writes the kernel's (N, K0) bf16 input);
-- `kernel`: the Triton MLP (ddfbench.ddf_fused);
+- `kernel`: the Triton MLP (ddfbench.models.ddf.fused);
 - `finish`: the compiled hit rule after it;
 - `whole`: DDFDepth(fused="mlp", compiled=True): the three parts, chunked as the race does;
 - `depth_kernel`: DDFDepth(fused="depth"): the whole answer as one kernel (box entry, encoding, MLP, hit rule);
@@ -28,8 +28,8 @@ import torch
 from ddfbench.bench.context import model_preset
 from ddfbench.bench.timing import measure_side_by_side
 from ddfbench.bench.views import incoherent_rays
-from ddfbench.ddf_infer import DDFDepth
 from ddfbench.models.ddf import DDF
+from ddfbench.models.ddf.infer import DDFDepth
 
 
 def kernel_flops(mlp) -> int:
@@ -40,7 +40,7 @@ def kernel_flops(mlp) -> int:
 def parts(device: str, rays: int, repeats: int, compiled: bool = True, chunk: int = 1 << 21, seed: int = 0) -> dict:
     """{part: {"median_s", "iqr_s", "rays_per_s", "tflops"?}, "n_rays", "flops_per_ray", ...} for N = rays
     (compiled: the passes around the kernel through torch.compile, as the race runs them)."""
-    from ddfbench.ddf_fused import config  # needs Triton: imported once the caller has checked
+    from ddfbench.models.ddf.fused import config  # needs Triton: imported once the caller has checked
 
     torch.manual_seed(seed)
     rep = DDF(model_preset("ddf_tuned")).to(device)

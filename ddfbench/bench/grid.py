@@ -1,4 +1,4 @@
-"""Section 5, grid SDF build: the level-set build (ddfbench.levelset.levelset_sdf_grid: exact narrow
+"""Section 5, grid SDF build: the level-set build (ddfbench.truth.levelset.levelset_sdf_grid: exact narrow
 band + fast sweeping + component signs) against brute force (the oracle's signed distance at every
 node), per resolution: time, and the largest error in the narrow band (|exact| <= 2 grid steps), in a
 wider shell (<= 8 steps) and overall.
@@ -15,10 +15,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from ddfbench import levelset
 from ddfbench.bench.context import DOMAIN, Context
 from ddfbench.bench.results import SectionResult, compare
 from ddfbench.bench.timing import once
+from ddfbench.truth import levelset
 
 
 def errors(grid_values: np.ndarray, exact: np.ndarray, h: float) -> dict:

@@ -1,5 +1,5 @@
 """Section 6, metrics: chamfer (L2, L1) + f-score + sided distances between two point clouds
-(ddfbench.metrics.cloud_metrics) at each size, against the bare KD-tree work they need (a cKDTree
+(ddfbench.evaluate.metrics.cloud_metrics) at each size, against the bare KD-tree work they need (a cKDTree
 built on each cloud and queried with the other, all cores), measured in the same process.
 
 Clouds: `n` seeded area-uniform samples of the shape, twice (independent seeds). Target: 100k x 100k
@@ -16,7 +16,7 @@ from scipy.spatial import cKDTree
 from ddfbench.bench.context import Context
 from ddfbench.bench.results import SectionResult, Target, compare
 from ddfbench.bench.timing import measure_side_by_side, once
-from ddfbench.metrics import cloud_metrics, sample_surface
+from ddfbench.evaluate.metrics import cloud_metrics, sample_surface
 
 RADII = (0.005, 0.01, 0.02)
 TARGET_POINTS, TARGET = 100_000, Target("<=", 1.5, on="value")

@@ -20,7 +20,7 @@ from ddfbench.bench.context import Context
 from ddfbench.bench.results import SectionResult, compare
 from ddfbench.bench.timing import measure_side_by_side
 from ddfbench.bench.views import incoherent_rays, view_rays
-from ddfbench.oracle import open3d_scene
+from ddfbench.truth.oracle import open3d_scene
 
 BACKENDS = ("open3d", "embree") + (("warp",) if importlib.util.find_spec("warp") else ())
 

@@ -3,15 +3,15 @@ in the same process, each speed with its accuracy against the oracle beside it (
 claim, measured where it is about: `--device cuda`).
 
 Contestants, all answering first-hit depth (no normals) for the same rays:
-- DDF (conf/model/ddf_tuned.yaml, the preset the experiments compare, trained `fit_seconds`): ddfbench.ddf_infer.DDFDepth on the device in fp32,
+- DDF (conf/model/ddf_tuned.yaml, the preset the experiments compare, trained `fit_seconds`): ddfbench.models.ddf.infer.DDFDepth on the device in fp32,
   bf16 autocast and bf16 compiled (torch.compile; only with `compile: true`), and on CUDA with Triton the MLP
   as one kernel between compiled passes (ddf_bf16_fused) and the whole answer as one kernel
   (ddf_bf16_fused_depth), each checked against bf16 first; the rows name the fastest, as measured; beside
   it the bare network forward on the same box-entry points (what answering has to cost at least);
-- Warp BVH (ddfbench.warp_cast) on the same device, rays already there;
+- Warp BVH (ddfbench.truth.warp_cast) on the same device, rays already there;
 - Embree on every CPU core, numpy rays on the host: open3d's RaycastingScene through the oracle, or with
   `--oracle-backend warp` (a machine without open3d) embreex in one process per core
-  (ddfbench.embree_pool); the JSON's details say which;
+  (ddfbench.truth.embree_pool); the JSON's details say which;
 - sphere tracing the neural SDF (conf/model/neural_sdf_tuned.yaml, trained `fit_seconds`) and a level-set grid SDF (`grid_resolution`),
   through their intersect (numpy in and out: host transfers included).
 Ray sets: "primary" (one pinhole camera, `px`^2 rays) and "incoherent" (origins uniform in the field
@@ -20,7 +20,7 @@ DDF's fastest variant, Warp and Embree) and the four DDF capacities of the Paret
 (conf/experiment/pareto.yaml, each trained `fit_seconds`) on the primary rays.
 Accuracy: depth MAE on rays both the contestant and the reference hit, and mask IoU, against Embree on
 the same rays (the open3d oracle, or with `--oracle-backend warp` the embreex pool, so that warp_bvh is
-never scored against itself; Warp's own answers only where embreex is missing too, as details say). Every timed call is synchronized (ddfbench.clock.clock), warm-up
+never scored against itself; Warp's own answers only where embreex is missing too, as details say). Every timed call is synchronized (ddfbench.core.clock.clock), warm-up
 excluded (ddfbench.bench.timing). Absolute figures hold for the device named in the JSON's env.
 Sizes: shape, px, incoherent_rays, sweep (ray counts), embree_max (largest sweep count Embree runs),
 fit_seconds, grid_resolution, n_samples (neural SDF samples), chunk (DDF rays per network call),
@@ -36,19 +36,19 @@ from typing import Callable
 import numpy as np
 import torch
 
-from ddfbench import plugins
 from ddfbench.bench.context import Context, model_preset, preset
 from ddfbench.bench.ddf import bare_forward
 from ddfbench.bench.results import SectionResult, Target, compare
 from ddfbench.bench.timing import Timing, measure_side_by_side
-from ddfbench.bench.views import incoherent_rays, view_rays
 from ddfbench.bench.tracing import grid_sdf, neural_sdf
-from ddfbench.ddf_infer import DDFDepth
-from ddfbench.geometry import box_entry
-from ddfbench.embree_pool import EmbreePool
-from ddfbench.errors import one_line
+from ddfbench.bench.views import incoherent_rays, view_rays
+from ddfbench.core import plugins
+from ddfbench.core.errors import one_line
+from ddfbench.core.geometry import box_entry
 from ddfbench.models.ddf import DDF
+from ddfbench.models.ddf.infer import DDFDepth
 from ddfbench.sampling import surface
+from ddfbench.truth.embree_pool import EmbreePool
 
 SPEED_GOAL = Target(">=", 1e9, on="value")  # the fastest DDF variant's rays/s at 1M+ rays on an H100/H200 (issue 17)
 BARE_SHARE = Target(">=", 0.8)  # the fastest DDF variant against the bare forward of the same network, same precision
@@ -86,7 +86,7 @@ def entry_forward(rep: DDF, o: torch.Tensor, d: torch.Tensor, chunk: int, precis
 
 def ddf_variants(ctx: Context, rep: DDF, compile_too: bool, details: dict | None = None) -> dict[str, DDFDepth]:
     """fp32, bf16, with compile_too and sizes `compile` bf16 compiled and, on CUDA with Triton, the fused kernels
-    of ddfbench.ddf_fused: with compile_too the MLP kernel between compiled passes (ddf_bf16_fused) and always
+    of ddfbench.models.ddf.fused: with compile_too the MLP kernel between compiled passes (ddf_bf16_fused) and always
     the one-kernel depth (ddf_bf16_fused_depth). A variant that cannot be built or answers 4096 rays unlike bf16
     is left out, with why in details[name]."""
     chunk = int(ctx.sizes["chunk"])
@@ -147,7 +147,7 @@ def _rate_row(measure: str, value_t: Timing, ref_name: str, ref_t: Timing, n: in
 
 
 def run(ctx: Context) -> SectionResult:
-    from ddfbench.warp_cast import WarpCaster  # the gpu extra; the section fails with its install hint without it
+    from ddfbench.truth.warp_cast import WarpCaster  # the gpu extra; the section fails with its install hint without it
 
     s = ctx.sizes
     shape, oracle = ctx.shape(s["shape"]), ctx.oracle(s["shape"])
@@ -214,7 +214,7 @@ def _race_all(ctx: Context, result: SectionResult, samples, ddf, nsdf, gsdf, war
                                        "goal 1e9 rays/s (H100/H200, 1M+ rays)", 1e9, device=ctx.device,
                                        threads=ctx.threads, precision=_precision(best), target=SPEED_GOAL))
     if any(name.startswith("ddf_bf16_fused") for name in variants):  # last tuned on the 1M incoherent rays
-        from ddfbench.ddf_fused import config
+        from ddfbench.models.ddf.fused import config
 
         result.details["fused_kernel_config"] = {"mlp": config("mlp"), "depth": config("depth")}
     sweep(ctx, variants, best, warp, embree, result)
@@ -233,7 +233,7 @@ def embree_all_cores(ctx: Context, oracle, mesh, result: SectionResult) -> tuple
         result.details["embree_all_cores"] = "not run: neither open3d (the oracle is Warp's) nor embreex is installed"
         return {}, None
     pool = EmbreePool(mesh)
-    result.details["embree_all_cores"] = f"embreex in {pool.workers} processes (ddfbench.embree_pool; no open3d)"
+    result.details["embree_all_cores"] = f"embreex in {pool.workers} processes (ddfbench.truth.embree_pool; no open3d)"
     return {"embree_all_cores": lambda o, d, on, dn: pool.hit_distance(on, dn)}, pool
 
 

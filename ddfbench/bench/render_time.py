@@ -28,16 +28,16 @@ import time
 from hydra import compose, initialize_config_dir
 from omegaconf import OmegaConf
 
-from ddfbench import CONF_DIR
 from ddfbench.bench.timing import measure_side_by_side
+from ddfbench.core.clock import clock, compute_threads
+from ddfbench.core.geometry import BOX_HALF
+from ddfbench.core.plugins import CONF_DIR
+from ddfbench.core.representation import Representation
 from ddfbench.models import load_family
-from ddfbench.geometry import BOX_HALF
 from ddfbench.render import mesh_reference
 from ddfbench.render.integrator import render
 from ddfbench.render.scene import parse_scene, plan_passes
-from ddfbench.clock import clock, compute_threads
-from ddfbench.representation import Representation
-from ddfbench.shapes import load_shape
+from ddfbench.truth.shapes import load_shape
 
 
 def _config(group: str, name: str) -> dict:

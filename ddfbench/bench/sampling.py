@@ -13,11 +13,11 @@ import numpy as np
 import open3d as o3d
 
 from ddfbench.bench.context import Context, preset
-from ddfbench.oracle import open3d_scene
 from ddfbench.bench.results import SectionResult, Target, compare
 from ddfbench.bench.timing import measure
 from ddfbench.bench.views import incoherent_rays
 from ddfbench.sampling import surface
+from ddfbench.truth.oracle import open3d_scene
 
 TARGET = Target(">=", 0.3)
 

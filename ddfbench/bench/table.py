@@ -24,7 +24,7 @@ def to_markdown(doc: dict[str, Any]) -> str:
         f"cpu {env.get('cpu')} × {env.get('cpu_count')}, torch threads {env.get('threads')}, sizes {opt['sizes']}, "
         f"repeats {opt['repeats']} (warm-up {opt['warmup']}), total {doc['total_s']:.0f} s, git {env.get('git_sha')}, "
         f"load average at start {doc.get('load_average_start')}"
-        f"{', glibc heap keeps freed blocks (ddfbench.heap)' if env.get('glibc_heap_kept') else ''}.",
+        f"{', glibc heap keeps freed blocks (ddfbench.core.heap)' if env.get('glibc_heap_kept') else ''}.",
         "",
         "Every figure stands beside a reference measured in the same process; the ratio is what to quote "
         "(absolute times on a shared machine are noisy). Warm figures are medians of the repeats; each row "

@@ -6,7 +6,7 @@ to the device, kernel selection), then `warmup` untimed rounds, then `repeats` t
 calls every fn once (the order rotates from round to round), so a figure and its reference see the
 same machine load. The warm figure is the
 median and interquartile range of a fn's timed calls. Clock reads wait for queued CUDA work
-(ddfbench.clock.clock), so asynchronous kernels are counted.
+(ddfbench.core.clock.clock), so asynchronous kernels are counted.
 """
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ from typing import Any, Callable, Iterator, TypeVar
 
 import torch
 
-from ddfbench.clock import median_iqr, timed
+from ddfbench.core.clock import median_iqr, timed
 
 T = TypeVar("T")
 

@@ -16,15 +16,15 @@ import numpy as np
 import torch
 
 from ddfbench.bench.context import Context, model_preset
-from ddfbench.bench.views import view_rays
 from ddfbench.bench.results import SectionResult, Target, compare
 from ddfbench.bench.timing import measure, once, precisions
+from ddfbench.bench.views import view_rays
+from ddfbench.core.geometry import box_entry
+from ddfbench.core.representation import Budget, FitData
+from ddfbench.evaluate.trace import TorchField, sphere_trace
 from ddfbench.models.grid_sdf import GridSDF
 from ddfbench.models.neural_sdf import NeuralSDF
-from ddfbench.representation import Budget, FitData
 from ddfbench.sampling.oracle_sdf import oracle_sdf_samples
-from ddfbench.geometry import box_entry
-from ddfbench.trace import TorchField, sphere_trace
 
 TARGET = Target(">=", 3.0)
 

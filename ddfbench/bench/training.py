@@ -17,9 +17,9 @@ import torch
 from ddfbench.bench.context import Context, model_preset, preset
 from ddfbench.bench.results import Row, SectionResult, compare
 from ddfbench.bench.timing import measure, once, precisions
-from ddfbench.errors import one_line
+from ddfbench.core.errors import one_line
+from ddfbench.core.representation import Budget, FitData
 from ddfbench.models import learned_families, load_family
-from ddfbench.representation import Budget, FitData
 from ddfbench.sampling import line_hits, surface
 
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ddfbench.geometry import BOX_HALF
+from ddfbench.core.geometry import BOX_HALF
 from ddfbench.render.camera import Camera
 from ddfbench.sampling.box import uniform_in_box
 from ddfbench.sampling.directions import uniform_directions

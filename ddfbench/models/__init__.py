@@ -1,7 +1,7 @@
 """Shape families: one module per family, each exposing its Representation subclass as FAMILY.
 
 A family is registered by being here (with its conf/model/<family>.yaml); what the rest of the program
-needs to know about it is on the class: sample_kind, learned, configure (see ddfbench.representation).
+needs to know about it is on the class: sample_kind, learned, configure (see ddfbench.core.representation).
 """
 
 from __future__ import annotations
@@ -9,8 +9,8 @@ from __future__ import annotations
 import importlib
 import pkgutil
 
-from ddfbench.errors import InputError
-from ddfbench.representation import Representation
+from ddfbench.core.errors import InputError
+from ddfbench.core.representation import Representation
 
 
 def available_families() -> list[str]:

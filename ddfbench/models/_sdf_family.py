@@ -1,4 +1,4 @@
-"""Shared bases of the SDF-like families: rays by sphere tracing (ddfbench.trace), mesh by marching cubes.
+"""Shared bases of the SDF-like families: rays by sphere tracing (ddfbench.evaluate.trace), mesh by marching cubes.
 
 SDFFamily: a subclass provides `field(points (M, 3) torch float32 on self.device) -> (M,)`
 signed distance and `surface_normals`; sdf on numpy points, intersect and to_mesh are here.
@@ -16,12 +16,12 @@ import numpy as np
 import torch
 import trimesh
 
-from ddfbench import extract
-from ddfbench.errors import InputError
-from ddfbench.geometry import BOX_HALF
-from ddfbench.representation import Budget, FitData, FitStats, Hits, Probe, Representation
-from ddfbench.trace import TraceOptions, autograd_normals, sphere_trace, to_hits
-from ddfbench.train import Schedule, train_loop
+from ddfbench.core.errors import InputError
+from ddfbench.core.geometry import BOX_HALF
+from ddfbench.core.representation import Budget, FitData, FitStats, Hits, Probe, Representation
+from ddfbench.evaluate import extract
+from ddfbench.evaluate.trace import TraceOptions, autograd_normals, sphere_trace, to_hits
+from ddfbench.fit.train import Schedule, train_loop
 
 FIELD_BATCH = 65536  # points per field call when evaluating numpy arrays
 
@@ -73,8 +73,8 @@ class SDFFamily(Representation):
         """
         field = self.sdf if level == 0 else (lambda p: self.sdf(p) - np.float32(level))
         mesh, self.extract_info = extract.sdf_to_mesh(
-            field, int(resolution), self.domain, coarse=int(self.cfg.get("extract_coarse", 1)),
-            lipschitz=float(self.cfg.get("extract_lipschitz", 1.0)))
+            field, int(resolution), self.domain, coarse=int(self.cfg["extract_coarse"]),
+            lipschitz=float(self.cfg["extract_lipschitz"]))
         return mesh
 
 
@@ -109,7 +109,7 @@ class NetSDFFamily(SDFFamily):
                probe: Probe | None, **kw: Any) -> FitStats:
         """train.train_loop under the preset's lr schedule (cfg) and grad_clip, probe(self) at the budget's
         probes; kw goes to train_loop (state: other objects its checkpoint keeps)."""
-        grad_clip = self.cfg.get("grad_clip")
+        grad_clip = self.cfg["grad_clip"]
         return train_loop(module, optimizer, step_fn, budget, Schedule.from_cfg(self.cfg),
                           (lambda: probe(self)) if probe is not None else None,
                           grad_clip=float(grad_clip) if grad_clip else None, desc=self.family, **kw)

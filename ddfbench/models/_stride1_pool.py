@@ -12,7 +12,7 @@ Under create_graph the backward is written as masks times the incoming gradient,
 (the GAN's R1 penalty, model.w_gp) matches torch's too; otherwise the last tap's share is the incoming
 gradient less the other taps' (exact, fewer passes). Where they differ: a window holding a NaN (torch
 passes its gradient to the NaN, here the window's last tap takes it) and an infinite incoming gradient
-(inf x 0 makes NaN beside it); training stops on either first (ddfbench.train's NaN guard). An in-place
+(inf x 0 makes NaN beside it); training stops on either first (ddfbench.fit.train's NaN guard). An in-place
 operation on the pool's output raises, as the output is kept for the backward. Off CPU (not measured there)
 and without autograd the pool is torch's own.
 """

@@ -41,15 +41,15 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from ddfbench.errors import InputError
-from ddfbench.geometry import BOX_HALF
+from ddfbench.core.errors import InputError
+from ddfbench.core.geometry import BOX_HALF
+from ddfbench.core.representation import Budget, FitData, FitStats, Probe
+from ddfbench.evaluate.trace import autograd_normals
+from ddfbench.fit.train import seed_everything
 from ddfbench.models import _gan_gemm as gan_gemm
 from ddfbench.models._sdf_family import NetSDFFamily
 from ddfbench.models._stride1_pool import Stride1MaxPool1d
 from ddfbench.models.neural_sdf import clamped_l1
-from ddfbench.representation import Budget, FitData, FitStats, Probe
-from ddfbench.trace import autograd_normals
-from ddfbench.train import seed_everything
 
 GRAD_BATCH = 128  # fewest points a call through the Conv1d modules: their forward is fastest at 64-256 a call,
                   # by the run (reports/bench/field_cost and its repeats, no grad; autograd passes not timed there)
@@ -121,10 +121,10 @@ class GanSDF(NetSDFFamily):
 
     def __init__(self, cfg: Mapping[str, Any], domain: float = BOX_HALF):
         super().__init__(cfg, domain)
-        near_surface_term(torch.zeros(1), torch.zeros(1), str(self.cfg.get("near_term", "exp")))  # validates
-        adversarial_losses(str(self.cfg.get("adversarial", "least_squares")))  # validates
-        self.scale = float(self.cfg.get("target_scale", 1.0))
-        self.eval_batch = int(self.cfg.get("eval_batch", 16))
+        near_surface_term(torch.zeros(1), torch.zeros(1), str(self.cfg["near_term"]))  # validates
+        adversarial_losses(str(self.cfg["adversarial"]))  # validates
+        self.scale = float(self.cfg["target_scale"])
+        self.eval_batch = int(self.cfg["eval_batch"])
         self.grad_batch = max(self.eval_batch, GRAD_BATCH)
         if self.scale <= 0 or self.eval_batch < 1:
             raise InputError(f"model.target_scale {self.scale} / eval_batch {self.eval_batch}: both must be > 0")
@@ -155,21 +155,20 @@ class GanSDF(NetSDFFamily):
         s = s * self.scale
         seed_everything(budget.seed)
         g = self.net = generator().to(self.device)
-        d = discriminator(bool(cfg.get("spectral_norm", False))).to(self.device)
+        d = discriminator(bool(cfg["spectral_norm"])).to(self.device)
         both = nn.ModuleDict({"G": g, "D": d})  # the NaN guard watches both networks
-        batch = min(int(cfg.get("batch", 1024)), len(x))
-        epochs = cfg.get("epochs")
+        batch = min(int(cfg["batch"]), len(x))
+        epochs = cfg["epochs"]
         if epochs is not None:
             if float(epochs) <= 0:
                 raise InputError(f"model.epochs {epochs}: must be > 0 (or null for the train budget alone)")
             budget = replace(budget, max_steps=min(budget.max_steps, math.ceil(float(epochs) * len(x) / batch)))
-        w_mse, w_near, w_adv, w_anchor, w_gp = (float(cfg.get(k, v)) for k, v in (
-            ("w_mse", 1.0), ("w_near", 2.0), ("w_adv", 5.0), ("w_anchor", 0.0), ("w_gp", 0.0)))
-        reading = str(cfg.get("near_term", "exp"))
-        g_adv, d_adv = adversarial_losses(str(cfg.get("adversarial", "least_squares")))
-        betas = tuple(float(b) for b in cfg.get("betas", (0.5, 0.999)))
-        opt_g = torch.optim.Adam(g.parameters(), lr=float(cfg.get("lr", 1e-4)), betas=betas)
-        opt_d = torch.optim.Adam(d.parameters(), lr=float(cfg.get("lr_d", 1e-4)), betas=betas)
+        w_mse, w_near, w_adv, w_anchor, w_gp = (float(cfg[k]) for k in ("w_mse", "w_near", "w_adv", "w_anchor", "w_gp"))
+        reading = str(cfg["near_term"])
+        g_adv, d_adv = adversarial_losses(str(cfg["adversarial"]))
+        betas = tuple(float(b) for b in cfg["betas"])
+        opt_g = torch.optim.Adam(g.parameters(), lr=float(cfg["lr"]), betas=betas)
+        opt_d = torch.optim.Adam(d.parameters(), lr=float(cfg["lr_d"]), betas=betas)
         anchor_delta = 0.1 * self.scale  # DeepSDF's 0.1 in unit-cube units
 
         def step_fn(step: int) -> torch.Tensor:

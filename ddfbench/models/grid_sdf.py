@@ -1,7 +1,7 @@
 """An N^3 grid of signed distance over the padded box, read by trilinear interpolation.
 
 Built from the GT mesh and its oracle (no training samples): `build` = "levelset"
-(exact narrow band + fast sweeping, ddfbench.levelset), "exact" (oracle signed
+(exact narrow band + fast sweeping, ddfbench.truth.levelset), "exact" (oracle signed
 distance at every node) or "auto" (exact up to `exact_max_resolution`, level set
 above). Stored as float32 or float16 in an uncompressed `.npz` (arrays `sdf` and a
 JSON `header`), loaded with allow_pickle=False. Outside the box the field is the
@@ -20,12 +20,12 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from ddfbench import levelset
-from ddfbench.errors import InputError
-from ddfbench.geometry import BOX_HALF
+from ddfbench.core.errors import InputError
+from ddfbench.core.geometry import BOX_HALF
+from ddfbench.core.representation import Budget, FitData, FitStats, Probe
+from ddfbench.evaluate.trace import central_difference_normals
 from ddfbench.models._sdf_family import SDFFamily
-from ddfbench.representation import Budget, FitData, FitStats, Probe
-from ddfbench.trace import central_difference_normals
+from ddfbench.truth import levelset
 
 _DTYPES = {"float32": np.float32, "float16": np.float16}
 
@@ -38,9 +38,9 @@ class GridSDF(SDFFamily):
 
     def __init__(self, cfg: Mapping[str, Any], domain: float = BOX_HALF):
         super().__init__(cfg, domain)
-        self.resolution = int(self.cfg.get("resolution", 128))
-        self.build = str(self.cfg.get("build", "auto"))
-        self.dtype = str(self.cfg.get("dtype", "float32"))
+        self.resolution = int(self.cfg["resolution"])
+        self.build = str(self.cfg["build"])
+        self.dtype = str(self.cfg["dtype"])
         if self.resolution < 4:
             raise InputError(f"model.resolution {self.resolution}: must be at least 4")
         if self.build not in ("levelset", "exact", "auto"):
@@ -62,12 +62,12 @@ class GridSDF(SDFFamily):
         start = time.perf_counter()
         n, method = self.resolution, self.build
         if method == "auto":
-            method = "exact" if n <= int(self.cfg.get("exact_max_resolution", 32)) else "levelset"
+            method = "exact" if n <= int(self.cfg["exact_max_resolution"]) else "levelset"
         if method == "exact":
             grid, info = levelset.exact_sdf_grid(data.oracle, n, self.domain), {}
         else:
             grid, info = levelset.levelset_sdf_grid(data.oracle, n, self.domain,
-                                                    band_cells=float(self.cfg.get("band_cells", 2.0)))
+                                                    band_cells=float(self.cfg["band_cells"]))
         self._set_grid(grid)
         seconds = time.perf_counter() - start
         return FitStats.built(self, seconds, {"build": method, **info}, probe)
@@ -96,7 +96,7 @@ class GridSDF(SDFFamily):
         if not path.endswith(".npz"):
             path = f"{path}.npz"
         header = {"family": self.family, "domain": self.domain, "resolution": self.resolution, "dtype": self.dtype,
-                  "build": self.build, "trace": dict(self.cfg.get("trace") or {})}
+                  "build": self.build, "trace": dict(self.cfg["trace"])}
         tmp = f"{path}.tmp{os.getpid()}.npz"
         np.savez(tmp, sdf=self.grid, header=np.array(json.dumps(header)))
         return self._publish(tmp, path)

@@ -12,10 +12,10 @@ from typing import Any, Mapping
 import numpy as np
 import trimesh
 
-from ddfbench.errors import InputError
-from ddfbench.geometry import BOX_HALF
-from ddfbench.oracle import Oracle
-from ddfbench.representation import Budget, FitData, FitStats, Hits, Probe, RayStatus, Representation
+from ddfbench.core.errors import InputError
+from ddfbench.core.geometry import BOX_HALF
+from ddfbench.core.representation import Budget, FitData, FitStats, Hits, Probe, RayStatus, Representation
+from ddfbench.truth.oracle import Oracle
 
 
 def decimate(mesh: trimesh.Trimesh, faces: int) -> trimesh.Trimesh:
@@ -54,11 +54,11 @@ class MeshFamily(Representation):
 
     def _set_mesh(self, mesh: trimesh.Trimesh, device: str = "cpu") -> None:
         self.mesh = mesh
-        self._oracle = Oracle(mesh, backend=str(self.cfg.get("backend", "open3d")), device=device)
+        self._oracle = Oracle(mesh, backend=str(self.cfg["backend"]), device=device)
 
     def fit(self, data: FitData, budget: Budget, probe: Probe | None = None) -> FitStats:
         start = time.perf_counter()
-        self._set_mesh(decimate(data.mesh, int(self.cfg.get("faces", 0) or 0)), budget.device)
+        self._set_mesh(decimate(data.mesh, int(self.cfg["faces"] or 0)), budget.device)
         seconds = time.perf_counter() - start
         return FitStats.built(self, seconds, {"faces": int(len(self.mesh.faces))}, probe)
 

@@ -27,11 +27,11 @@ from typing import Any, Mapping
 import torch
 from torch import nn
 
-from ddfbench.errors import InputError
-from ddfbench.geometry import BOX_HALF, FourierFeatures
+from ddfbench.core.errors import InputError
+from ddfbench.core.geometry import BOX_HALF, FourierFeatures
+from ddfbench.core.representation import Budget, FitData, FitStats, Probe
+from ddfbench.fit.train import seed_everything
 from ddfbench.models._sdf_family import NetSDFFamily
-from ddfbench.representation import Budget, FitData, FitStats, Probe
-from ddfbench.train import seed_everything
 
 _ARCH_KEYS = ("n_harmonics", "omega0", "width", "depth", "activation", "softplus_beta")
 
@@ -100,8 +100,8 @@ class NeuralSDF(NetSDFFamily):
 
     def _new_net(self) -> SDFNet:
         net = SDFNet(**{k: self.cfg[k] for k in _ARCH_KEYS if k in self.cfg})
-        if bool(self.cfg.get("geometric_init", True)):
-            net.geometric_init(float(self.cfg.get("init_radius", 0.3)))
+        if bool(self.cfg["geometric_init"]):
+            net.geometric_init(float(self.cfg["init_radius"]))
         return net.eval()
 
     def fit(self, data: FitData, budget: Budget, probe: Probe | None = None) -> FitStats:
@@ -109,11 +109,10 @@ class NeuralSDF(NetSDFFamily):
         x, s = self._sdf_tensors(data)
         seed_everything(budget.seed)
         self.net = net = self._new_net().to(self.device)
-        batch = min(int(self.cfg.get("batch", 8192)), len(x))
-        delta = float(self.cfg.get("delta", 0.1))
-        w_sdf, w_surf, w_eik = (float(self.cfg.get(k, v)) for k, v in
-                                (("w_sdf", 1.0), ("w_surface", 0.0), ("w_eikonal", 0.0)))
-        surface_tol = float(self.cfg.get("surface_tol", 1e-4))
+        batch = min(int(self.cfg["batch"]), len(x))
+        delta = float(self.cfg["delta"])
+        w_sdf, w_surf, w_eik = (float(self.cfg[k]) for k in ("w_sdf", "w_surface", "w_eikonal"))
+        surface_tol = float(self.cfg["surface_tol"])
 
         def step_fn(step: int) -> torch.Tensor:
             idx = torch.randint(0, len(x), (batch,), device=self.device)
@@ -131,7 +130,7 @@ class NeuralSDF(NetSDFFamily):
                 loss = loss + w_eik * eikonal_residual(net, uniform)
             return loss
 
-        optimizer = torch.optim.Adam(net.parameters(), lr=float(self.cfg.get("lr", 1e-3)))
+        optimizer = torch.optim.Adam(net.parameters(), lr=float(self.cfg["lr"]))
         stats = self._train(net, optimizer, step_fn, budget, probe)
         stats.extra["n_params"] = self.n_params()
         return stats

@@ -23,13 +23,13 @@ from __future__ import annotations
 import os
 from typing import Any, Mapping
 
+from ddfbench.core.clock import compute_threads
+from ddfbench.core.representation import Budget, FitData, Representation
 from ddfbench.render.compare import image_metrics
 from ddfbench.render.images import write_renders
 from ddfbench.render.integrator import Frames, render
 from ddfbench.render.scene import Scene, parse_scene, plan_passes
-from ddfbench.clock import compute_threads
 from ddfbench.render.timing import RenderTiming, time_renders
-from ddfbench.representation import Budget, FitData, Representation
 
 __all__ = ["render_scene", "render", "parse_scene", "plan_passes", "Frames", "Scene", "mesh_reference"]
 

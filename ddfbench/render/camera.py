@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ddfbench.geometry import pinhole_rays, unit
+from ddfbench.core.geometry import pinhole_rays, unit
 
 
 @dataclass(frozen=True, eq=False)

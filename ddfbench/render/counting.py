@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ddfbench.representation import Hits, RayStatus, Representation
+from ddfbench.core.representation import Hits, RayStatus, Representation
 
 RAY_KINDS = ("primary", "shadow", "bounce")
 WORK_KEYS = ("field_evals", "backward_passes", "trace_steps")

@@ -30,9 +30,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ddfbench.core.representation import Representation
 from ddfbench.render.counting import CountedTracer
 from ddfbench.render.scene import Passes, Scene
-from ddfbench.representation import Representation
 
 _JITTER_STREAM, _BOUNCE_STREAM = 0, 1
 

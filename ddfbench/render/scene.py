@@ -22,10 +22,13 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
-from ddfbench.errors import InputError, checked_int
+from ddfbench.core import plugins
+from ddfbench.core.errors import InputError, checked_int
 from ddfbench.render.camera import Camera, orbit_cameras
 
 OUTPUTS = ("depth", "mask", "normal", "shaded", "shadow", "path")
+BASE_SCENE = "depth"  # conf/scene/depth.yaml declares every key a scene has, with its default; presets extend it
+OPTIONAL_CAMERA_KEYS = ("look_at", "positions")  # cameras.look_at (default the origin), cameras.positions (or an orbit)
 LIGHT_TYPES = ("directional", "point")
 
 
@@ -107,25 +110,25 @@ def _vec3(value: Any, key: str) -> tuple[float, float, float]:
     return v  # type: ignore[return-value]
 
 
-def _int(cfg: Mapping[str, Any], key: str, default: int, least: int) -> int:
-    return checked_int(cfg.get(key, default), f"scene.{key}", least)
+def _int(cfg: Mapping[str, Any], key: str, least: int, label: str = "scene") -> int:
+    return checked_int(cfg[key], f"{label}.{key}", least)
 
 
-def _positive(cfg: Mapping[str, Any], key: str, default: float, upper: float = math.inf) -> float:
-    value = cfg.get(key, default)
+def _positive(cfg: Mapping[str, Any], key: str, upper: float = math.inf, label: str = "scene") -> float:
+    value, name = cfg[key], f"{label}.{key}"
     try:
         x = float(value)
     except (TypeError, ValueError):
-        raise InputError(f"scene.{key}={value!r}: expected a number") from None
+        raise InputError(f"{name}={value!r}: expected a number") from None
     if not (0 < x < upper):
-        raise InputError(f"scene.{key}={value!r}: expected a number in (0, {upper})")
+        raise InputError(f"{name}={value!r}: expected a number in (0, {upper})")
     return x
 
 
 def _light(cfg: Any, i: int) -> Light:
     if not isinstance(cfg, Mapping):
         raise InputError(f"scene.lights[{i}]={cfg!r}: expected a mapping with type, direction|position, intensity")
-    kind = str(cfg.get("type", ""))
+    kind = cfg.get("type")
     if kind not in LIGHT_TYPES:
         raise InputError(f"scene.lights[{i}].type={kind!r}: unknown (directional | point)")
     key = "direction" if kind == "directional" else "position"
@@ -137,28 +140,28 @@ def _light(cfg: Any, i: int) -> Light:
         if norm == 0:
             raise InputError(f"scene.lights[{i}].direction: zero vector")
         vector = tuple(x / norm for x in vector)  # type: ignore[assignment]
-    intensity = _rgb(cfg.get("intensity", 1.0), f"lights[{i}].intensity")
+    if "intensity" not in cfg:
+        raise InputError(f"scene.lights[{i}]: a {kind} light needs 'intensity'")
+    intensity = _rgb(cfg["intensity"], f"lights[{i}].intensity")
     return Light(kind, vector, intensity)
 
 
-def _cameras(cfg: Any, width: int, height: int) -> tuple[Camera, ...]:
-    if not isinstance(cfg, Mapping):
-        raise InputError(f"scene.cameras={cfg!r}: expected a mapping (n, radius, elevation_deg, azimuth_deg, fov_deg, up)")
-    fov = _positive(cfg, "fov_deg", 40.0, upper=180.0)
-    radius = _positive(cfg, "radius", 2.0)
-    look_at = np.asarray(_vec3(cfg.get("look_at", (0.0, 0.0, 0.0)), "cameras.look_at"))
-    up = np.asarray(_vec3(cfg.get("up", (0.0, 1.0, 0.0)), "cameras.up"))
+def _cameras(cfg: Mapping[str, Any], width: int, height: int) -> tuple[Camera, ...]:
+    fov = _positive(cfg, "fov_deg", upper=180.0, label="scene.cameras")
+    radius = _positive(cfg, "radius", label="scene.cameras")
+    look_at = np.asarray(_vec3(cfg["look_at"], "cameras.look_at") if "look_at" in cfg else (0.0, 0.0, 0.0))
+    up = np.asarray(_vec3(cfg["up"], "cameras.up"))
     if not np.any(up):
         raise InputError("scene.cameras.up: zero vector")
     if cfg.get("positions"):
         positions = [_vec3(p, f"cameras.positions[{i}]") for i, p in enumerate(_list(cfg["positions"], "cameras.positions"))]
         cams = tuple(Camera(np.asarray(p), look_at, fov, width, height, up) for p in positions)
     else:
-        n = _int(cfg, "n", 2, 1)
-        elevation = float(cfg.get("elevation_deg", 25.0))
+        n = _int(cfg, "n", 1, label="scene.cameras")
+        elevation = float(cfg["elevation_deg"])
         if not -89.0 <= elevation <= 89.0:
             raise InputError(f"scene.cameras.elevation_deg={elevation}: expected a value in [-89, 89]")
-        azimuth = float(cfg.get("azimuth_deg", 30.0))
+        azimuth = float(cfg["azimuth_deg"])
         cams = orbit_cameras(n, radius, elevation, azimuth, fov, width, height, look_at, up)
     for i, cam in enumerate(cams):
         if np.allclose(cam.position, cam.look_at):
@@ -166,9 +169,27 @@ def _cameras(cfg: Any, width: int, height: int) -> tuple[Camera, ...]:
     return cams
 
 
+def declared_scene(cfg: Mapping[str, Any]) -> dict[str, Any]:
+    """cfg overlaid on the keys conf/scene/depth.yaml declares (the one source of scene defaults), nested
+    mappings (cameras, timing) key by key; a key no scene declares is a one-line InputError naming it."""
+    base = plugins.defaults("scene", BASE_SCENE)
+    plugins.strict_keys("scene", cfg, base)
+    out = {**base, **cfg}
+    for key in ("cameras", "timing"):
+        given = out[key] if out[key] is not None else {}
+        if not isinstance(given, Mapping):
+            raise InputError(f"scene.{key}={given!r}: expected a mapping ({', '.join(sorted(base[key]))})")
+        known = {**base[key], **dict.fromkeys(OPTIONAL_CAMERA_KEYS if key == "cameras" else ())}
+        plugins.strict_keys(f"scene.{key}", given, known)
+        out[key] = {**base[key], **given}
+    return out
+
+
 def parse_scene(cfg: Mapping[str, Any]) -> Scene:
-    """Validate a scene config (the `scene` node as a mapping) into a Scene; InputError on bad values."""
-    outputs = [str(o) for o in (cfg.get("outputs") or [])]
+    """Validate a scene config (the `scene` node as a mapping; keys it leaves out take conf/scene/depth.yaml's
+    values) into a Scene; InputError on an unknown key or a bad value."""
+    cfg = declared_scene(cfg)
+    outputs = [str(o) for o in (cfg["outputs"] or [])]
     unknown = sorted(set(outputs) - set(OUTPUTS))
     if unknown:
         raise InputError(f"scene.outputs: unknown {unknown} (choose from {', '.join(OUTPUTS)})")
@@ -176,27 +197,25 @@ def parse_scene(cfg: Mapping[str, Any]) -> Scene:
         raise InputError("scene.outputs: empty; name at least one of " + ", ".join(OUTPUTS))
     if "shadow" in outputs and not {"shaded", "path"} & set(outputs):
         raise InputError("scene.outputs: 'shadow' needs 'shaded' or 'path' (shadows darken a shaded image)")
-    width, height = _int(cfg, "width", 64, 1), _int(cfg, "height", 64, 1)
-    timing = cfg.get("timing") or {}
-    if not isinstance(timing, Mapping):
-        raise InputError(f"scene.timing={timing!r}: expected a mapping (repeats, warmup)")
+    width, height = _int(cfg, "width", 1), _int(cfg, "height", 1)
+    timing = cfg["timing"]
     return Scene(
-        name=str(cfg.get("name", "custom")),
+        name=str(cfg["name"]),
         outputs=frozenset(outputs),
         width=width,
         height=height,
-        spp=_int(cfg, "spp", 1, 1),
-        max_depth=_int(cfg, "max_depth", 1, 1),
-        cameras=_cameras(cfg.get("cameras") or {}, width, height),
-        lights=tuple(_light(c, i) for i, c in enumerate(_list(cfg.get("lights") or [], "lights"))),
-        albedo=_albedo(cfg.get("albedo", 0.8)),
-        background=_rgb(cfg.get("background", 1.0), "background"),
-        environment=_rgb(cfg.get("environment", 0.0), "environment"),
-        ray_offset=_positive(cfg, "ray_offset", 1e-3, upper=0.1),
-        chunk=_int(cfg, "chunk", 1 << 18, 1),
-        repeats=_int(timing, "repeats", 3, 1),
-        warmup=_int(timing, "warmup", 1, 0),
-        timing_max_seconds=_positive(timing, "max_seconds", 20.0),
+        spp=_int(cfg, "spp", 1),
+        max_depth=_int(cfg, "max_depth", 1),
+        cameras=_cameras(cfg["cameras"], width, height),
+        lights=tuple(_light(c, i) for i, c in enumerate(_list(cfg["lights"] or [], "lights"))),
+        albedo=_albedo(cfg["albedo"]),
+        background=_rgb(cfg["background"], "background"),
+        environment=_rgb(cfg["environment"], "environment"),
+        ray_offset=_positive(cfg, "ray_offset", upper=0.1),
+        chunk=_int(cfg, "chunk", 1),
+        repeats=_int(timing, "repeats", 1, label="scene.timing"),
+        warmup=_int(timing, "warmup", 0, label="scene.timing"),
+        timing_max_seconds=_positive(timing, "max_seconds", label="scene.timing"),
     )
 
 

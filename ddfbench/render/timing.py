@@ -1,6 +1,6 @@
 """Render timing: the cold render (the first, with whatever setup the representation does lazily:
 BVH commit, weights to the device, kernel compilation) apart from warm renders (median and IQR of
-`repeats` renders after `warmup` untimed ones), each on ddfbench.clock's synchronized clock.
+`repeats` renders after `warmup` untimed ones), each on ddfbench.core.clock's synchronized clock.
 """
 
 from __future__ import annotations
@@ -8,7 +8,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Callable, TypeVar
 
-from ddfbench.clock import median_iqr, timed
+from ddfbench.core.clock import median_iqr, timed
 
 T = TypeVar("T")
 

@@ -32,13 +32,13 @@ from typing import Any
 
 import pandas as pd
 
-from ddfbench.errors import InputError
+from ddfbench.core.errors import InputError
 from ddfbench.report import convergence
 from ddfbench.report.gallery import write_gallery
 from ddfbench.report.paired import paired_report
 from ddfbench.report.plots import PLOTS, plots_for, write_plots
 from ddfbench.report.tables import per_run, summarize, to_csv, to_latex, to_markdown
-from ddfbench.runs import code_commits, find_records
+from ddfbench.run.runs import code_commits, find_records
 
 
 def _experiment(records: list[dict[str, Any]], records_dir: str) -> str:

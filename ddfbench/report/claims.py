@@ -29,12 +29,12 @@ import re
 from dataclasses import dataclass, replace
 from typing import Any, Callable
 
-from ddfbench.errors import InputError
-from ddfbench.metric_registry import by_name
+from ddfbench.core.errors import InputError
+from ddfbench.evaluate.metric_registry import by_name
 from ddfbench.report import matched, paired
 from ddfbench.report.records import SURFACE_FACTORS, chamfer_l2, empty_mesh, no_result, ok_records, shape_name
 from ddfbench.report.stats import INTERVAL_NAME, Summary, sig3, summarize_values
-from ddfbench.runs import code_commits, find_records
+from ddfbench.run.runs import code_commits, find_records
 
 CONFIRMED, REFUTED, NOT_SEPARABLE, NOT_TESTABLE, NO_RECORDS, NOT_CONVERGED = (
     "confirmed", "refuted", "not separable at n", "not testable here", "no records", "not converged")

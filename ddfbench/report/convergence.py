@@ -14,7 +14,7 @@ from typing import Any, Iterable
 
 import numpy as np
 
-from ddfbench.metric_registry import by_name
+from ddfbench.evaluate.metric_registry import by_name
 from ddfbench.report.records import OFF_SHAPE_RULE, Record, empty_mesh, off_shape, ok_records, shape_name
 from ddfbench.report.stats import sig3
 

@@ -3,7 +3,7 @@
     python -m ddfbench.report.export_mlflow results/ablation                 # into sqlite:///results/mlflow.db
     python -m ddfbench.report.export_mlflow results/ablation --uri http://host:5000
 
-Every record.json below the folder becomes one MLflow run (ddfbench.tracking.log_record); records
+Every record.json below the folder becomes one MLflow run (ddfbench.run.tracking.log_record); records
 already logged (same key and status) are left alone, so running it twice adds nothing.
 """
 
@@ -13,8 +13,8 @@ import argparse
 import os
 import sys
 
-from ddfbench.runs import find_records
-from ddfbench.tracking import default_uri, log_record
+from ddfbench.run.runs import find_records
+from ddfbench.run.tracking import default_uri, log_record
 
 
 def export(records_dir: str, uri: str) -> tuple[int, int]:

@@ -42,8 +42,8 @@ def shaded_mesh_view(mesh_path: str | None, scene_cfg: dict[str, Any]) -> np.nda
     import open3d as o3d
     import trimesh
 
-    from ddfbench.oracle import open3d_scene
     from ddfbench.render.scene import parse_scene
+    from ddfbench.truth.oracle import open3d_scene
 
     camera = parse_scene(scene_cfg).cameras[0]
     image = np.broadcast_to(_BACKGROUND, (camera.height, camera.width, 3)).copy()

@@ -22,7 +22,7 @@ from typing import Any, Iterable
 import pandas as pd
 
 from ddfbench.report.stats import summarize_values
-from ddfbench.runs import find_records
+from ddfbench.run.runs import find_records
 
 REFERENCE = "ddf_tuned"  # the DDF that render_time runs (its tuned preset); tests check it is a member
 ERROR, SPEED = ("metrics", "depth_mae"), ("cost", "render_warm_s")

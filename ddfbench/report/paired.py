@@ -13,7 +13,7 @@ from typing import Any, Callable, Iterable
 
 import numpy as np
 
-from ddfbench.metric_registry import by_name
+from ddfbench.evaluate.metric_registry import by_name
 from ddfbench.report.records import SURFACE_FACTORS, Record, ok_records
 from ddfbench.report.stats import Summary, sig3, summarize_values
 

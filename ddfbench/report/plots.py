@@ -31,10 +31,9 @@ import matplotlib.pyplot as plt  # noqa: E402
 import matplotlib.ticker  # noqa: E402
 import numpy as np  # noqa: E402
 
-from ddfbench.metric_registry import by_name as registry_metrics  # noqa: E402
+from ddfbench.evaluate.metric_registry import by_name as registry_metrics  # noqa: E402
 from ddfbench.report import convergence  # noqa: E402
-from ddfbench.report.records import (SURFACE_FACTORS, as_float, chamfer_l2, no_result, ok_records,  # noqa: E402
-                                     shape_name)
+from ddfbench.report.records import SURFACE_FACTORS, as_float, chamfer_l2, no_result, ok_records, shape_name  # noqa: E402
 from ddfbench.report.stats import summarize_values  # noqa: E402
 from ddfbench.report.tables import override_labels  # noqa: E402
 

@@ -1,11 +1,11 @@
 """Run records as the report modules read them.
 
-A record is the dict one run writes to <out_dir>/<experiment>/<key>/record.json (ddfbench.runs):
+A record is the dict one run writes to <out_dir>/<experiment>/<key>/record.json (ddfbench.run.runs):
 status ("ok" | "failed"), model (the preset label), shape {"name"}, config (the semantic config,
 seed included), metrics (chamfer_l2, fscore, noise_floor, ...), cost (fit_s, render_warm_s, ...),
 sampling, fit (steps, probes, ...). Values may be missing, None, or a string such as "inf" (the
 writer's strict JSON). These helpers read the fields every report module needs: which runs
-finished, the shape, a number, and the chamfer L2 (through ddfbench.metric_registry).
+finished, the shape, a number, and the chamfer L2 (through ddfbench.evaluate.metric_registry).
 """
 
 from __future__ import annotations
@@ -13,7 +13,7 @@ from __future__ import annotations
 import math
 from typing import Any, Iterable
 
-from ddfbench.metric_registry import FSCORE_RADII, as_float, by_name
+from ddfbench.evaluate.metric_registry import FSCORE_RADII, as_float, by_name
 
 __all__ = ["OFF_SHAPE_RULE", "Record", "WIDEST_F", "as_float", "chamfer_l2", "empty_mesh", "no_result", "off_shape",
            "ok_records", "shape_name"]

@@ -21,10 +21,11 @@ import subprocess
 import sys
 import time
 
-from ddfbench import plugins, tune
-from ddfbench.report.__main__ import MixedCommits, write_report
+from ddfbench.core import plugins
+from ddfbench.fit import tune
 from ddfbench.report import matched
 from ddfbench.report import tune as tune_report
+from ddfbench.report.__main__ import MixedCommits, write_report
 from ddfbench.report.claims import write_claims
 
 EXPERIMENTS = ("tune", "ablation", "sampling", "representations", "storage", "render_time", "render_matched", "pareto",

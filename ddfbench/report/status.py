@@ -22,8 +22,10 @@ from typing import Any
 
 from omegaconf import DictConfig, OmegaConf, open_dict
 
-from ddfbench import CONF_DIR, plugins, runs
-from ddfbench.errors import InputError
+from ddfbench.core import plugins
+from ddfbench.core.errors import InputError
+from ddfbench.core.plugins import CONF_DIR
+from ddfbench.run import runs
 
 LAUNCHER_PREFIXES = ("hydra/launcher", "hydra.launcher")  # cannot change a run; its plugin may be absent here
 

@@ -5,7 +5,7 @@ Values stay numeric until rendered. A row is one configuration: records whose co
 records (the sweep's axes, e.g. `capacity=c2`), not by every config key that differs.
 Failed runs are counted per row and a row with fewer ok runs than the fullest row is flagged
 (`n` shows "ok/expected" and a dagger), so nothing is silently averaged over fewer seeds.
-The metrics are those of `ddfbench.metric_registry`. Per column (per shape where there are several)
+The metrics are those of `ddfbench.evaluate.metric_registry`. Per column (per shape where there are several)
 the best mean is bold only when its t interval over seeds overlaps no other row's; otherwise the
 rows whose intervals overlap the best are marked tied (report.stats). The metric's noise floor (GT
 against an independent resample of GT) is its own row per shape. The fit budget ("steps",
@@ -21,10 +21,10 @@ from typing import Any, Iterable
 import numpy as np
 import pandas as pd
 
-from ddfbench import metric_registry
+from ddfbench.evaluate import metric_registry
 from ddfbench.report.records import OFF_SHAPE_RULE, empty_mesh, off_shape
 from ddfbench.report.stats import INTERVAL_NAME, best_and_ties, summarize_values
-from ddfbench.runs import NON_SEMANTIC_KEYS
+from ddfbench.run.runs import NON_SEMANTIC_KEYS
 
 FLOOR_MODEL = "noise floor"  # the `model` cell of a noise-floor row
 SEED_KEYS = ("seed",)

@@ -22,10 +22,10 @@ from typing import Any
 
 import pandas as pd
 
-from ddfbench import plugins
-from ddfbench.metric_registry import objective_value
-from ddfbench.runs import code_commits, find_records
-from ddfbench.tune import search_space
+from ddfbench.core import plugins
+from ddfbench.evaluate.metric_registry import objective_value
+from ddfbench.fit.tune import search_space
+from ddfbench.run.runs import code_commits, find_records
 
 OBJECTIVE = "chamfer_l2"  # conf/experiment/tune.yaml `objective`
 SCALE = 1e3  # printed as x10^3, as in every report table

@@ -14,11 +14,11 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from ddfbench.errors import InputError
-from ddfbench.oracle import Oracle
+from ddfbench.core.errors import InputError
 from ddfbench.sampling.cache import dataset_key, dataset_path
-from ddfbench.samples import Samples
-from ddfbench.shapes import Shape
+from ddfbench.sampling.samples import Samples
+from ddfbench.truth.oracle import Oracle
+from ddfbench.truth.shapes import Shape
 
 KINDS = ("rays", "sdf")
 

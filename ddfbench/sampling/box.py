@@ -1,4 +1,4 @@
-"""Uniform points in the axis-aligned field box [-h, h]^3 (its ray intervals: ddfbench.geometry.ray_box)."""
+"""Uniform points in the axis-aligned field box [-h, h]^3 (its ray intervals: ddfbench.core.geometry.ray_box)."""
 
 from __future__ import annotations
 

@@ -10,8 +10,8 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from ddfbench.oracle import Oracle
-from ddfbench.shapes import Shape
+from ddfbench.truth.oracle import Oracle
+from ddfbench.truth.shapes import Shape
 
 CACHE_VERSION = 2  # 2: ray samples carry line_hit; bump when a sampler's output changes for the same config
 

@@ -6,8 +6,8 @@ from typing import Iterator
 
 import numpy as np
 
-from ddfbench.errors import InputError
-from ddfbench.samples import Samples
+from ddfbench.core.errors import InputError
+from ddfbench.sampling.samples import Samples
 
 RAY_SAMPLE_BYTES = 29  # x 12 + d 12 + t 4 + hit 1 (float32, bool)
 SDF_SAMPLE_BYTES = 16  # x 12 + sdf 4

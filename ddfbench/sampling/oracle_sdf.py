@@ -9,9 +9,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from ddfbench.geometry import BOX_HALF
-from ddfbench.oracle import Oracle
-from ddfbench.samples import Samples
+from ddfbench.core.geometry import BOX_HALF
+from ddfbench.sampling.samples import Samples
+from ddfbench.truth.oracle import Oracle
 
 
 def oracle_sdf_samples(mesh, oracle: Oracle, n: int, seed: int, domain: float = BOX_HALF) -> Samples:

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numbers
 from typing import Any, Iterable, Mapping
 
-from ddfbench.errors import InputError, checked_int
+from ddfbench.core.errors import InputError, checked_int
 
 
 def check_keys(cfg: Mapping[str, Any], allowed: Iterable[str]) -> None:

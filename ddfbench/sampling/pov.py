@@ -19,14 +19,14 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from ddfbench.errors import InputError
-from ddfbench.geometry import pinhole_rays, ray_box
-from ddfbench.oracle import Oracle
+from ddfbench.core.errors import InputError
+from ddfbench.core.geometry import pinhole_rays, ray_box
 from ddfbench.sampling import params
 from ddfbench.sampling.collect import Collector, chunks
+from ddfbench.sampling.samples import Samples
 from ddfbench.sampling.steps import STEP_RULES, marching_distances
-from ddfbench.samples import Samples
-from ddfbench.shapes import Shape
+from ddfbench.truth.oracle import Oracle
+from ddfbench.truth.shapes import Shape
 
 KEYS = ("n_azimuth", "n_polar", "resolution", "radius", "fov_deg", "s_p", "steps", "t_min", "box", "max_samples")
 CHUNK = 1 << 21

@@ -12,13 +12,13 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from ddfbench.oracle import Oracle
 from ddfbench.sampling import params
 from ddfbench.sampling.box import uniform_in_box
 from ddfbench.sampling.collect import Collector, chunks
 from ddfbench.sampling.directions import uniform_directions
-from ddfbench.samples import Samples
-from ddfbench.shapes import Shape
+from ddfbench.sampling.samples import Samples
+from ddfbench.truth.oracle import Oracle
+from ddfbench.truth.shapes import Shape
 
 KEYS = ("n_samples", "box", "max_samples")
 CHUNK = 1 << 21

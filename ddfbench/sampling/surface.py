@@ -41,16 +41,16 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from ddfbench.geometry import ray_box
-from ddfbench.oracle import Oracle
+from ddfbench.core.geometry import ray_box
 from ddfbench.sampling import params
 from ddfbench.sampling.box import uniform_in_box
 from ddfbench.sampling.collect import Collector, chunks
 from ddfbench.sampling.directions import DIRECTION_RULES, random_perpendicular
+from ddfbench.sampling.samples import Samples
 from ddfbench.sampling.steps import STEP_RULES, marching_distances
 from ddfbench.sampling.triangles import BARYCENTRIC_RULES, FACE_MODES, face_plan, points_on_faces
-from ddfbench.samples import Samples
-from ddfbench.shapes import Shape
+from ddfbench.truth.oracle import Oracle
+from ddfbench.truth.shapes import Shape
 
 KEYS = ("face_mode", "s_fc", "s_dr", "s_p", "barycentric", "directions", "steps", "t_min",
         "perpendicular", "sdf_sigmas", "sdf_uniform", "box", "max_samples")

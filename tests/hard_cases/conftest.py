@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 import torch
 
-from ddfbench import plugins
+from ddfbench.core import plugins
 from ddfbench.models import available_families
-from ddfbench.oracle import full_backend
-from ddfbench.shapes import HARD_CASES, Shape, load_shape
+from ddfbench.truth.oracle import full_backend
+from ddfbench.truth.shapes import HARD_CASES, Shape, load_shape
 
 torch.set_num_threads(1)
 
@@ -53,9 +53,9 @@ def cube():
 def ray_backends(mesh):
     """Every exact ray caster of a mesh: name -> fn(origins, directions) -> (t, hit, normal); the warp
     ones (Warp's BVH on the CPU) only where Warp is installed."""
+    from ddfbench.core.representation import Budget, FitData
     from ddfbench.models.mesh import MeshFamily
-    from ddfbench.oracle import Oracle
-    from ddfbench.representation import Budget, FitData
+    from ddfbench.truth.oracle import Oracle
 
     def oracle_fn(backend):
         orc = Oracle(mesh, backend)
@@ -97,7 +97,8 @@ def compose(*overrides: str, out_dir) -> dict:
     (plugins.job_config: the plugins' experiments parts dropped, as the runner does first)."""
     import os
 
-    from hydra import compose as hydra_compose, initialize_config_dir
+    from hydra import compose as hydra_compose
+    from hydra import initialize_config_dir
     from omegaconf import OmegaConf
 
     conf = os.path.join(os.path.dirname(__file__), "..", "..", "conf")

@@ -12,11 +12,11 @@ import numpy as np
 import pytest
 import torch
 
-from ddfbench.metrics import geometry_metrics
+from ddfbench.core.representation import Budget, FitData, RayStatus
+from ddfbench.evaluate.metrics import geometry_metrics
 from ddfbench.models import load_family
-from ddfbench.oracle import Oracle
-from ddfbench.representation import Budget, FitData, RayStatus
-from ddfbench.samples import Samples
+from ddfbench.sampling.samples import Samples
+from ddfbench.truth.oracle import Oracle
 from tests.hard_cases.conftest import assert_well_formed, unit
 
 SMALL = {"width": 32, "depth": 2, "pos_freqs": 2, "dir_freqs": 1, "batch": 64, "eval_batch": 8192,

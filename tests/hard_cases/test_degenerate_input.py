@@ -11,10 +11,10 @@ import numpy as np
 import pytest
 import trimesh
 
-from ddfbench.errors import InputError
-from ddfbench.catalog import dirty_sphere
-from ddfbench.metrics import sample_surface
-from ddfbench.oracle import Oracle
+from ddfbench.core.errors import InputError
+from ddfbench.evaluate.metrics import sample_surface
+from ddfbench.truth.catalog import dirty_sphere
+from ddfbench.truth.oracle import Oracle
 from tests.hard_cases.conftest import assert_well_formed, hard_shape, has_warp, unit
 
 DEFECTS = dict(zero_area=3, duplicate=4, flipped=5, unreferenced=6)
@@ -90,7 +90,7 @@ def test_zero_area_faces_never_sampled():
 def test_all_faces_degenerate_is_a_clear_error():
     v = np.array([[0.0, 0, 0], [1, 0, 0], [2, 0, 0], [3, 0, 0]])
     mesh = trimesh.Trimesh(v, [[0, 1, 2], [1, 1, 3], [0, 2, 3]], process=False)
-    from ddfbench.shapes import validate
+    from ddfbench.truth.shapes import validate
 
     with pytest.raises(InputError) as info:
         validate(mesh, "shape line.obj")

@@ -13,7 +13,7 @@ import sys
 import pytest
 
 from ddfbench.models import available_families
-from ddfbench.runs import find_records
+from ddfbench.run.runs import find_records
 from tests.hard_cases.conftest import compose
 
 # The steps bound the work; the wall-clock cap is far away so that a loaded machine cannot end a fit
@@ -28,7 +28,7 @@ DIVERGE = {"gan_sdf": ["model.lr=1e30", "model.lr_d=1e30"],
 
 @pytest.mark.parametrize("family", [f for f in DIVERGE if f in available_families()])
 def test_divergent_fit_gives_a_failed_record_with_the_reason(family, tmp_path):
-    from ddfbench.runner import run
+    from ddfbench.run.runner import run
 
     rec = run(compose(f"model={family}", *SMALL, *DIVERGE[family], out_dir=tmp_path))
     assert rec["status"] == "failed"

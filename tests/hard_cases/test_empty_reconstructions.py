@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 import trimesh
 
-from ddfbench import metrics
-from ddfbench.extract import empty_mesh
-from ddfbench.shapes import load_shape
+from ddfbench.evaluate import metrics
+from ddfbench.evaluate.extract import empty_mesh
+from ddfbench.truth.shapes import load_shape
 
 RADII = [0.005, 0.01, 0.02]
 D = 2 * 0.6 * np.sqrt(3.0)
@@ -70,7 +70,7 @@ def test_empty_point_cloud_gets_the_penalty(gt, empty_side):
 
 def test_runner_flags_an_empty_reconstruction(tmp_path, monkeypatch):
     from ddfbench.models.mesh import MeshFamily
-    from ddfbench.runner import run
+    from ddfbench.run.runner import run
     from tests.hard_cases.conftest import compose
 
     monkeypatch.setattr(MeshFamily, "to_mesh", lambda self, resolution: empty_mesh())

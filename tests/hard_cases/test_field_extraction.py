@@ -9,8 +9,8 @@ InputError; a field that crosses still gives a mesh.
 import numpy as np
 import pytest
 
-from ddfbench import extract
-from ddfbench.errors import InputError
+from ddfbench.core.errors import InputError
+from ddfbench.evaluate import extract
 
 
 @pytest.fixture

@@ -9,9 +9,9 @@ normals stay finite after fit and after save/load.
 import numpy as np
 import pytest
 
+from ddfbench.core.representation import Budget, FitData
 from ddfbench.models import load_family
-from ddfbench.oracle import Oracle
-from ddfbench.representation import Budget, FitData
+from ddfbench.truth.oracle import Oracle
 from tests.hard_cases.conftest import unit
 
 FP16_MAX = float(np.finfo(np.float16).max)  # 65504

@@ -3,10 +3,9 @@
 import numpy as np
 import pytest
 
-from ddfbench.errors import InputError
-from ddfbench.extract import grid_axis
-from ddfbench.shapes import HARD_CASES, SHAPE_BUILDERS
-from ddfbench.shapes import load_shape
+from ddfbench.core.errors import InputError
+from ddfbench.core.geometry import grid_axis
+from ddfbench.truth.shapes import HARD_CASES, SHAPE_BUILDERS, load_shape
 from tests.hard_cases.conftest import hard_shape
 
 SMALL = {"hard/torus_grid": {"segments": 40}, "hard/moved": {"base": "cube", "offset": 10.0}}
@@ -40,6 +39,6 @@ def test_bad_parameters_are_input_errors(name, params):
 
 
 def test_load_shape_serves_hard_names():
-    """load_shape builds names starting with "hard/" from ddfbench.shapes.SHAPE_BUILDERS, validated like any mesh."""
+    """load_shape builds names starting with "hard/" from ddfbench.truth.shapes.SHAPE_BUILDERS, validated like any mesh."""
     shape = load_shape({"name": "hard/plate_pair", "params": {"gap": 1e-3}})
     assert np.array_equal(shape.mesh.vertices, hard_shape("hard/plate_pair", gap=1e-3).mesh.vertices)

@@ -12,10 +12,10 @@ with a one-line InputError instead of returning a quantized shape.
 import numpy as np
 import pytest
 
-from ddfbench.errors import InputError
-from ddfbench.metrics import geometry_metrics
+from ddfbench.core.errors import InputError
+from ddfbench.evaluate.metrics import geometry_metrics
 from ddfbench.models.mesh import decimate
-from ddfbench.shapes import load_shape
+from ddfbench.truth.shapes import load_shape
 from tests.hard_cases.conftest import hard_shape
 
 RADII = [0.005, 0.01, 0.02]

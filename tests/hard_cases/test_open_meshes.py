@@ -15,10 +15,10 @@ import numpy as np
 import pytest
 
 from ddfbench.models import available_families
-from ddfbench.oracle import Oracle
-from ddfbench.runner import run
+from ddfbench.run.runner import run
 from ddfbench.sampling import available_strategies, build
-from ddfbench.shapes import load_shape
+from ddfbench.truth.oracle import Oracle
+from ddfbench.truth.shapes import load_shape
 from tests.hard_cases.conftest import compose
 
 OPEN = ["open_box", "bunny10k", "range_scan"]

@@ -8,12 +8,13 @@ inside test agrees with the analytic sphere and cube away from their surfaces.
 
 import numpy as np
 import pytest
-from hypothesis import given, settings, strategies as st
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-from ddfbench import metrics
-from ddfbench.oracle import Oracle
-from ddfbench.shapes import load_shape
+from ddfbench.evaluate import metrics
+from ddfbench.truth.oracle import Oracle
+from ddfbench.truth.shapes import load_shape
 from tests.hard_cases.conftest import has_warp
 
 coords = st.floats(-1.0, 1.0, allow_nan=False, width=32)

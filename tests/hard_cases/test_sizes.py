@@ -10,10 +10,10 @@ import resource
 import numpy as np
 import pytest
 
-from ddfbench.metrics import geometry_metrics
+from ddfbench.core.representation import Budget, FitData
+from ddfbench.evaluate.metrics import geometry_metrics
 from ddfbench.models.mesh import MeshFamily
-from ddfbench.oracle import Oracle
-from ddfbench.representation import Budget, FitData
+from ddfbench.truth.oracle import Oracle
 from tests.hard_cases.conftest import assert_well_formed, hard_shape, has_warp, unit
 
 

@@ -10,21 +10,28 @@ Learned families are fitted for a few seconds on the sphere (a convex shape: eve
 the true surface misses), so any hit near t = 0 is a self-hit, whatever the fit's accuracy.
 gan_sdf is not in that check: on 1 CPU thread a few seconds are ~20 steps of its generator (~2 MFLOP
 per point), which leave no surface for camera rays to find; it answers rays through the same
-SDFFamily.intersect and ddfbench.trace.sphere_trace as neural_sdf, which is checked here.
+SDFFamily.intersect and ddfbench.evaluate.trace.sphere_trace as neural_sdf, which is checked here.
 """
 
 import numpy as np
 import pytest
 import torch
 
+from ddfbench.core.representation import Budget, FitData, RayStatus
+from ddfbench.evaluate.trace import TraceOptions, sphere_trace
 from ddfbench.models import load_family
-from ddfbench.oracle import Oracle
 from ddfbench.render.counting import CountedTracer
-from ddfbench.representation import Budget, FitData, RayStatus
-from ddfbench.trace import TraceOptions, sphere_trace
 from ddfbench.sampling.oracle_sdf import oracle_sdf_samples
-from tests.hard_cases.conftest import (ORACLE_BACKEND, assert_well_formed, backend_params, compose, has_family, hard_shape,
-                                      unit)
+from ddfbench.truth.oracle import Oracle
+from tests.hard_cases.conftest import (
+    ORACLE_BACKEND,
+    assert_well_formed,
+    backend_params,
+    compose,
+    hard_shape,
+    has_family,
+    unit,
+)
 
 RAY_OFFSET = 1e-3  # conf/scene/*.yaml ray_offset: checked below against the scene configs
 FAMILIES = [f for f in ("mesh", "grid_sdf", "neural_sdf", "ddf") if has_family(f)]

@@ -14,9 +14,9 @@ Run with -s to see the table; the numbers also go to the junit report (record_pr
 import numpy as np
 import pytest
 
-from ddfbench.catalog import grid_step
-from ddfbench.representation import RayStatus
-from tests.hard_cases.conftest import has_family, hard_shape
+from ddfbench.core.representation import RayStatus
+from ddfbench.truth.catalog import grid_step
+from tests.hard_cases.conftest import hard_shape, has_family
 from tests.hard_cases.test_surface_start_rays import quick_fit
 
 VOXELS = [2.0, 1.0, 0.5, 0.25]  # plate thickness in grid steps h

@@ -1,6 +1,6 @@
 """Case 8: sphere tracing at grazing angles and near misses; step caps and over-relaxation.
 
-Promise (ddfbench.trace.sphere_trace, and every SDF family through it):
+Promise (ddfbench.evaluate.trace.sphere_trace, and every SDF family through it):
 - a ray that passes a surface at a distance above the hit tolerance is never a hit: it misses, or
   runs out of steps and is UNDECIDED (t = inf, hit = False);
 - UNDECIDED rays are counted: Hits.stats["undecided"] and the counting layer's undecided_rays equal
@@ -14,11 +14,11 @@ import numpy as np
 import pytest
 import torch
 
+from ddfbench.core.representation import Budget, FitData, RayStatus
+from ddfbench.evaluate.trace import TraceOptions, sphere_trace
 from ddfbench.models import load_family
-from ddfbench.oracle import Oracle
 from ddfbench.render.counting import CountedTracer
-from ddfbench.representation import Budget, FitData, RayStatus
-from ddfbench.trace import TraceOptions, sphere_trace
+from ddfbench.truth.oracle import Oracle
 from tests.hard_cases.conftest import hard_shape, unit
 from tests.hard_cases.test_surface_start_rays import plate_sdf
 

@@ -9,9 +9,9 @@ ray passes through a vertex or an edge shared by several triangles.
 import numpy as np
 import pytest
 
+from ddfbench.core.representation import Budget, FitData, RayStatus
 from ddfbench.models.mesh import MeshFamily
-from ddfbench.oracle import Oracle
-from ddfbench.representation import Budget, FitData, RayStatus
+from ddfbench.truth.oracle import Oracle
 from tests.hard_cases.conftest import backend_params, unit
 
 

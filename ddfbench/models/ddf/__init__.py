@@ -12,7 +12,7 @@ lines: through a grid node x and along direction theta the network, queried once
 entry (as for a camera ray), says where the line first crosses the surface; x lies before that
 crossing (s >= 0, outside or occluded) or past it (s < 0). Near the surface the lines facing it agree,
 and a truncated mean over them (as in depth-map fusion) is the value (see line_vote); marching cubes
-runs on a coarse-to-fine narrow band (ddfbench.extract.banded_grid) whose fine nodes query only the
+runs on a coarse-to-fine narrow band (ddfbench.evaluate.extract.banded_grid) whose fine nodes query only the
 mesh_keep lines their coarse parent found nearest the surface. mesh_field "udf" is the paper's
 UDF(x) = min over K directions of phi(x, theta_k), taken only over directions whose visibility says
 hit (paper Eq. 5), meshed as a thin shell.
@@ -31,14 +31,14 @@ cfg keys (conf/model/ddf.yaml documents each):
   loss      loss ("l1" | "clamp" | "clamp_misses", with delta: ddfbench.models.ddf.fit.clamp_loss), vis_weight, entry_share (share of each batch drawn
             from line_entry_labels of up to MAX_ENTRY_LINES sample lines, visibility only, half hits
             and half misses; none unless the samples carry line_hit and it has both), batch, lr, weight_decay,
-            lr_schedule / lr_final_ratio / lr_warmup (ddfbench.train.Schedule), grad_clip
+            lr_schedule / lr_final_ratio / lr_warmup (ddfbench.fit.train.Schedule), grad_clip
   mesh      mesh_field ("signed" | "udf"); signed: mesh_directions (K on the coarsest lattice),
             mesh_keep (lines per finer node), mesh_band (truncation, unit-cube units), mesh_rank
             (order statistic of |s| used as the distance bound away from the surface), mesh_coarse
             (stride of the first lattice), mesh_lipschitz (narrow-band bound);
             udf: udf_directions (K), udf_rank (1 = the min; r = the r-th smallest, robust to
             a spurious hit), udf_level_steps (level in grid steps), udf_coarse,
-            udf_lipschitz (narrow band, see ddfbench.extract.banded_grid), udf_project
+            udf_lipschitz (narrow band, see ddfbench.evaluate.extract.banded_grid), udf_project
             (move shell vertices onto the predicted surface along -normal)
   storage   storage_dtype (float32 | float16 state dict), eval_batch
 """

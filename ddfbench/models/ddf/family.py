@@ -8,12 +8,12 @@ import numpy as np
 import torch
 import trimesh
 
-from ddfbench.geometry import BOX_HALF, box_entry
+from ddfbench.core.geometry import BOX_HALF, box_entry
+from ddfbench.core.representation import Budget, FitData, FitStats, Hits, Probe, RayStatus, Representation
 from ddfbench.models.ddf import fit as ddf_fit
 from ddfbench.models.ddf import mesh as ddf_mesh
 from ddfbench.models.ddf.network import DDFNet, checked_config
 from ddfbench.models.ddf.rays import unit_normals
-from ddfbench.representation import Budget, FitData, FitStats, Hits, Probe, RayStatus, Representation
 
 # Normals in intersect: a chunk whose hit share reaches this runs one backward over all its rays rather
 # than a second forward + backward over its hits. Measured on CPU for the default preset (1 thread,

@@ -9,12 +9,11 @@ import numpy as np
 import torch
 from torch import nn
 
-from ddfbench.errors import InputError
-from ddfbench.geometry import box_entry
+from ddfbench.core.errors import InputError
+from ddfbench.core.geometry import box_entry
+from ddfbench.core.representation import Budget, FitData, FitStats, Probe, Representation
+from ddfbench.fit.train import Schedule, seed_everything, train_loop
 from ddfbench.models.ddf.network import DDFNet
-from ddfbench.representation import Budget, FitData, FitStats, Probe, Representation
-from ddfbench.train import Schedule, seed_everything, train_loop
-
 
 MAX_ENTRY_LINES = 1 << 22  # sample lines drawn (seeded) for the entry labels: 4M lines, 100 MB
 

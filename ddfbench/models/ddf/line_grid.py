@@ -22,7 +22,7 @@ import math
 import torch
 from torch import nn
 
-from ddfbench.geometry import ray_box
+from ddfbench.core.geometry import ray_box
 
 _PRIMES = (1, 2654435761, 805459861)
 LOOKUP_CHUNK = 65536  # points per lookup call: its int64 corner indices take levels * 8 * 8 bytes a point

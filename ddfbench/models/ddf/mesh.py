@@ -1,5 +1,5 @@
 """Mesh extraction of the DDF: the signed line-vote field (default) or the paper's UDF shell, marching
-cubes on a coarse-to-fine narrow band (ddfbench.extract)."""
+cubes on a coarse-to-fine narrow band (ddfbench.evaluate.extract)."""
 
 from __future__ import annotations
 
@@ -8,8 +8,8 @@ import math
 import numpy as np
 import trimesh
 
-from ddfbench.extract import sdf_to_mesh, udf_to_mesh
-from ddfbench.representation import Representation
+from ddfbench.core.representation import Representation
+from ddfbench.evaluate.extract import sdf_to_mesh, udf_to_mesh
 
 
 def fibonacci_directions(k: int) -> np.ndarray:

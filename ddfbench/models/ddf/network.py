@@ -8,9 +8,9 @@ from typing import Any, Mapping
 import torch
 from torch import nn
 
-from ddfbench import plugins
-from ddfbench.errors import InputError
-from ddfbench.geometry import BOX_HALF, FourierFeatures
+from ddfbench.core import plugins
+from ddfbench.core.errors import InputError
+from ddfbench.core.geometry import BOX_HALF, FourierFeatures
 from ddfbench.models.ddf.line_grid import LineGrid
 
 _CHOICES = {"activation": ("relu", "softplus"), "direction": ("vector", "angles"), "param": ("point", "ray"),
@@ -19,7 +19,7 @@ _CHOICES = {"activation": ("relu", "softplus"), "direction": ("vector", "angles"
 
 
 def checked_config(cfg: Mapping[str, Any]) -> dict[str, Any]:
-    """conf/model/ddf.yaml overlaid by cfg (strict, see ddfbench.plugins), with the values checked."""
+    """conf/model/ddf.yaml overlaid by cfg (strict, see ddfbench.core.plugins), with the values checked."""
     out = plugins.family_config("ddf", cfg)
     for key, allowed in _CHOICES.items():
         if out[key] not in allowed:

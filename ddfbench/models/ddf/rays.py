@@ -1,4 +1,4 @@
-"""Ray-level helper of the DDF: unit normals from gradients (its box entry: ddfbench.geometry.box_entry)."""
+"""Ray-level helper of the DDF: unit normals from gradients (its box entry: ddfbench.core.geometry.box_entry)."""
 
 from __future__ import annotations
 

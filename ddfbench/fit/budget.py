@@ -1,0 +1,65 @@
+"""What bounds a fit: a fixed amount of work (optimizer steps or epochs) or a wall-clock time.
+
+`train.budget` (conf/train/default.yaml) picks one:
+  steps       train.max_steps optimizer steps; no time limit. Repeatable: the same steps on any machine.
+  epochs      train.max_epochs passes over the labels: ceil(epochs x n_labels / batch) steps, batch from
+              the model config (`batch`); no time limit.
+  wall-clock  train.max_seconds of training (or max_steps, whichever ends first): "what do I get in N
+              seconds" runs. The steps taken vary with the machine and its load, so such records are
+              labelled "wall-clock" in the record (fit.budget) and in every table.
+The record's fit.budget is the bound that ended the fit, fit.epochs the passes over the labels it made.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any, Mapping
+
+from ddfbench.core.errors import InputError
+
+KINDS = ("steps", "epochs", "wall-clock")
+
+
+@dataclass(frozen=True)
+class FitLimit:
+    """kind: one of KINDS; max_steps >= 1; max_seconds > 0 (inf for a work budget)."""
+
+    kind: str
+    max_steps: int
+    max_seconds: float
+
+
+def batch_size(model_cfg: Mapping[str, Any]) -> int | None:
+    """The model's training batch (labels per step) from its config, None when it declares none."""
+    return None if model_cfg.get("batch") is None else int(model_cfg["batch"])
+
+
+def fit_limit(train_cfg: Mapping[str, Any], model_cfg: Mapping[str, Any], n_labels: int | None) -> FitLimit:
+    """The limit a fit runs under, from the train config (see the module docstring)."""
+    kind = str(train_cfg.get("budget", "wall-clock"))
+    if kind not in KINDS:
+        raise InputError(f"train.budget '{kind}': unknown (steps | epochs | wall-clock)")
+    if kind == "steps":
+        return FitLimit(kind, int(train_cfg["max_steps"]), math.inf)
+    if kind == "wall-clock":
+        return FitLimit(kind, int(train_cfg["max_steps"]), float(train_cfg["max_seconds"]))
+    epochs = train_cfg.get("max_epochs")
+    if epochs is None or float(epochs) <= 0:
+        raise InputError(f"train.max_epochs {epochs!r}: train.budget=epochs needs a number > 0")
+    batch = batch_size(model_cfg)
+    if batch is None or not n_labels:
+        # families without a batched fit (mesh, grid SDF) build once; the limit does not bind them
+        return FitLimit(kind, int(train_cfg["max_steps"]), math.inf)
+    return FitLimit(kind, max(1, math.ceil(float(epochs) * int(n_labels) / batch)), math.inf)
+
+
+def fit_record(limit: FitLimit, stop: str | None, steps: int, model_cfg: Mapping[str, Any],
+               n_labels: int | None) -> dict[str, Any]:
+    """{budget, epochs} for the record's `fit`: budget is "wall-clock" when the time limit ended the fit,
+    else the configured kind; epochs = steps x batch / labels (None without a batch or labels)."""
+    batch = batch_size(model_cfg)
+    return {
+        "budget": "wall-clock" if stop == "max_seconds" else limit.kind,
+        "epochs": steps * batch / n_labels if batch and n_labels else None,
+    }

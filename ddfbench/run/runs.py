@@ -1,0 +1,206 @@
+"""Run records: schema version, config key, atomic write, resume.
+
+A run writes <out_dir>/<experiment>/<key>/record.json by temporary file + rename, so a
+reader (or a run killed with SIGKILL) sees either no record or a complete one.
+"""
+
+from __future__ import annotations
+
+import functools
+import hashlib
+import json
+import math
+import os
+import platform
+import socket
+import subprocess
+import sys
+import tempfile
+from typing import Any, Mapping
+
+from ddfbench.core.errors import one_line
+
+SCHEMA_VERSION = 1
+
+# Top-level config keys that do not change results: paths, resume flags, worker counts, logging, tracking.
+NON_SEMANTIC_KEYS = ("out_dir", "force", "threads", "quiet", "experiment_name", "hydra", "tracking", "objective",
+                     "checkpoint_every")
+
+RECORD_FIELDS = (
+    "schema_version", "key", "status", "error", "experiment", "family", "model", "shape", "sampling",
+    "scene", "metrics", "cost", "counts", "artifacts", "flags", "config", "overrides", "env", "started", "finished",
+)
+
+
+def semantic_config(cfg: Mapping[str, Any]) -> dict[str, Any]:
+    """The resolved config minus non-semantic keys."""
+    return {k: v for k, v in cfg.items() if k not in NON_SEMANTIC_KEYS}
+
+
+def config_key(cfg: Mapping[str, Any]) -> str:
+    """16 hex chars: sha256 of the semantic config (canonical JSON) and the schema version."""
+    blob = json.dumps({"schema": SCHEMA_VERSION, "config": semantic_config(cfg)}, sort_keys=True, default=str)
+    return hashlib.sha256(blob.encode()).hexdigest()[:16]
+
+
+RECORD_FILE = "record.json"  # in each run folder
+
+
+def run_dir(out_dir: str, experiment: str, key: str) -> str:
+    """The folder of one run: <out_dir>/<experiment>/<config key>."""
+    return os.path.join(out_dir, experiment, key)
+
+
+def record_path(out_dir: str, experiment: str, key: str) -> str:
+    """Where the run's record lives: <run_dir>/record.json."""
+    return os.path.join(run_dir(out_dir, experiment, key), RECORD_FILE)
+
+
+def _json_safe(value: Any) -> Any:
+    """Replace non-finite floats by strings ("inf", "nan") so the file is strict JSON."""
+    if isinstance(value, float) and not math.isfinite(value):
+        return str(value)
+    if isinstance(value, dict):
+        return {str(k): _json_safe(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_json_safe(v) for v in value]
+    if hasattr(value, "item") and callable(value.item):  # numpy scalars
+        return _json_safe(value.item())
+    return value
+
+
+def write_json_atomic(path: str, data: Mapping[str, Any]) -> None:
+    """Write JSON to a temporary file in the same folder, fsync, then rename over path."""
+    folder = os.path.dirname(path) or "."
+    os.makedirs(folder, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=".record.", suffix=".tmp", dir=folder)
+    try:
+        with os.fdopen(fd, "w") as fh:
+            json.dump(_json_safe(dict(data)), fh, indent=1, allow_nan=False)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+
+
+def load_record(path: str) -> tuple[dict[str, Any] | None, str | None]:
+    """(the record at path, None), or (None, what is wrong with the file); (None, None) where there is none."""
+    try:
+        with open(path, encoding="utf-8") as fh:
+            rec = json.load(fh)
+    except FileNotFoundError:
+        return None, None
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        return None, f"not a readable JSON file ({one_line(exc)})"
+    if not isinstance(rec, dict):
+        return None, f"holds a JSON {type(rec).__name__}, not a run record (an object)"
+    return rec, None
+
+
+def read_record(path: str) -> dict[str, Any] | None:
+    """The record at path, or None where there is none or it is not one (a rerun writes it anew)."""
+    return load_record(path)[0]
+
+
+def is_done(path: str) -> bool:
+    """True where an ok record of the current schema exists (the run is skipped unless forced)."""
+    rec = read_record(path)
+    return bool(rec) and rec.get("status") == "ok" and rec.get("schema_version") == SCHEMA_VERSION
+
+
+def find_records(root: str) -> list[dict[str, Any]]:
+    """Every record.json below root (any depth), each with its own folder under "_dir". A file that is not
+    a record (cut short, not UTF-8, not a JSON object) is left out with a line on stderr naming it."""
+    out = []
+    for folder, _, files in os.walk(root):
+        if RECORD_FILE not in files:
+            continue
+        rec, problem = load_record(os.path.join(folder, RECORD_FILE))
+        if problem:
+            print(f"ddfbench: skipped {os.path.join(folder, RECORD_FILE)}: {problem}", file=sys.stderr)
+        elif rec is not None:
+            rec["_dir"] = folder
+            out.append(rec)
+    return sorted(out, key=lambda r: (r.get("experiment", ""), r.get("key", "")))
+
+
+CODE_PATHS = ("ddfbench", "conf", "pyproject.toml")  # what a result depends on (reports/, README do not count)
+
+
+def code_commits(records: list[dict[str, Any]]) -> list[str]:
+    """The distinct code commits of the records: env.code_sha (the last commit that changed the code), else
+    env.git_sha for older records ("unknown" where a record has neither)."""
+    env = [r.get("env") or {} for r in records]
+    return sorted({str(e.get("code_sha") or e.get("git_sha") or "unknown") for e in env})
+
+
+def _git(*args: str) -> str | None:
+    try:
+        root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+        out = subprocess.run(["git", *args], cwd=root, capture_output=True, text=True, timeout=5)
+        return out.stdout.strip() or None
+    except (OSError, subprocess.SubprocessError):
+        return None
+
+
+# names the commit of a copied tree whose .git is missing or stale (a lent GPU machine's copy carries the
+# working tree over the .git of the session's first commit); when set it wins over git
+GIT_SHA_ENV = "DDFBENCH_GIT_SHA"
+
+
+def _git_sha() -> str | None:
+    return os.environ.get(GIT_SHA_ENV) or _git("rev-parse", "HEAD")
+
+
+def code_sha() -> str | None:
+    """The last commit that changed the code (CODE_PATHS): committing reports midway leaves it unchanged.
+    $DDFBENCH_GIT_SHA where set (whoever copies the tree names a commit that changed the code)."""
+    return os.environ.get(GIT_SHA_ENV) or _git("log", "-1", "--format=%H", "--", *CODE_PATHS)
+
+
+OPTIONAL = ("open3d", "warp", "pymeshlab", "embreex")  # modules whose versions are recorded; a GPU machine may lack some
+
+
+def _installed(module: str) -> str | None:
+    """The version of the installed distribution that provides `module` (e.g. open3d-cpu for open3d); None where
+    none does or where its import is blocked (sys.modules[module] is None)."""
+    if module in sys.modules and sys.modules[module] is None:  # an import blocked on purpose
+        return None
+    from importlib import metadata
+
+    for dist in _providers().get(module, []):
+        return metadata.version(dist)
+    return None
+
+
+@functools.cache
+def _providers() -> dict[str, list[str]]:
+    """{top-level module: distributions that provide it} of this environment (one scan a process)."""
+    from importlib import metadata
+
+    return metadata.packages_distributions()
+
+
+def environment(device: str, threads: int) -> dict[str, Any]:
+    """Where and with what the run was measured."""
+    import numpy
+    import torch
+    import trimesh
+
+    gpu = torch.cuda.get_device_name(0) if device.startswith("cuda") and torch.cuda.is_available() else None
+    return {
+        "git_sha": _git_sha(),
+        "code_sha": code_sha(),
+        "git_sha_from": GIT_SHA_ENV if os.environ.get(GIT_SHA_ENV) else "git",
+        "versions": {"python": platform.python_version(), "torch": torch.__version__, "numpy": numpy.__version__,
+                     "trimesh": trimesh.__version__, **{name: _installed(name) for name in OPTIONAL}},
+        "device": device,
+        "threads": int(threads),
+        "cpu": platform.processor() or platform.machine(),
+        "cpu_count": os.cpu_count(),
+        "gpu": gpu,
+        "hostname": socket.gethostname(),
+    }

@@ -1,0 +1,48 @@
+"""`python -m ddfbench.report.pool_seeds`: a two-seed table and later one-seed reports pooled into one table."""
+
+import math
+
+import pandas as pd
+import pytest
+
+from ddfbench.report.pool_seeds import COLUMNS, main, pooled_table
+
+
+def write_folder(root, later_seeds: dict[int, float]):
+    """table.csv of seeds 0-1 with chamfer_l2 mean 3e-5, std sqrt(2)*1e-5 (so the seeds were 2e-5 and 4e-5), every
+    other column mean 1 std 0; one seed<K>/runs.csv a later seed with chamfer_l2 = later_seeds[K]."""
+    row = {"model": "gan_sdf_tuned", "n": 2}
+    for column, _, _ in COLUMNS:
+        row[f"{column}_mean"], row[f"{column}_std"] = 1.0, 0.0
+    row["chamfer_l2_mean"], row["chamfer_l2_std"] = 3e-5, math.sqrt(2) * 1e-5
+    pd.DataFrame([row, {"model": "noise floor"}]).to_csv(root / "table.csv", index=False)
+    for seed, value in later_seeds.items():
+        (root / f"seed{seed}").mkdir()
+        runs = {"model": ["gan_sdf_tuned", "gan_sdf_tuned"], "status": ["ok", "failed"], "seed": [seed, seed]}
+        runs.update({column: [1.0, 9.0] for column, _, _ in COLUMNS})
+        runs["chamfer_l2"] = [value, 1.0]
+        pd.DataFrame(runs).to_csv(root / f"seed{seed}" / "runs.csv", index=False)
+
+
+def test_the_pool_recovers_both_seeds_and_adds_the_later_ones(tmp_path):
+    write_folder(tmp_path, {3: 6e-5, 2: 8e-5})
+    lines = pooled_table(str(tmp_path), "gan_sdf_tuned", " here").splitlines()
+    assert lines[0].startswith("# gan_sdf_tuned here: seeds 0-1 and 2, 3 pooled")
+    assert "n = 4" in lines[2] and lines[2].endswith("| seed 2 | seed 3 |")
+    chamfer = next(line for line in lines if line.startswith("| CD-L2 ×10³ |")).split(" | ")
+    # seeds 0-3 scaled by 1e3: 0.02, 0.04, 0.08, 0.06 -> mean 0.05; the failed run's 1.0 is left out
+    assert chamfer[1].startswith("0.05 ± ")
+    assert chamfer[2] == "0.02, 0.04" and chamfer[3] == "0.08" and chamfer[4].rstrip(" |") == "0.06"
+
+
+def test_a_seed_folder_must_hold_its_own_seed(tmp_path):
+    write_folder(tmp_path, {2: 6e-5})
+    (tmp_path / "seed2").rename(tmp_path / "seed5")
+    with pytest.raises(AssertionError, match="seed5"):
+        pooled_table(str(tmp_path), "gan_sdf_tuned", "")
+
+
+def test_the_command_prints_the_table(tmp_path, capsys):
+    write_folder(tmp_path, {2: 6e-5})
+    main([str(tmp_path), "--title", " x"])
+    assert capsys.readouterr().out == pooled_table(str(tmp_path), "gan_sdf_tuned", " x")

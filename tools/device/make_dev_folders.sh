@@ -1,0 +1,28 @@
+#!/bin/bash
+# Issue 17: make the two ignored staging folders that the device calls carry (the device machine has no
+# network and one call carries 64 MiB): .devA for the first call (stage_and_parts.sh as pre.sh, Warp's
+# first part, the wheels the bench needs), .devB for the second (Warp's second part and the rest of its
+# wheel, the embreex wheel, the bunny, setup_b.sh, run_race.sh as go.sh, run_train_curves.sh).
+# usage: bash tools/device/make_dev_folders.sh   (in the repo root, with the project's venv active)
+set -euo pipefail
+cd "$(dirname "$0")/../.."
+here=tools/device
+rm -rf .whl .devA .devB /tmp/wx && mkdir -p .whl .devA .devB /tmp/wx
+pip download -q --no-deps --only-binary=:all: --python-version 3.12 --implementation cp \
+  --platform manylinux_2_28_x86_64 -d .whl warp-lang==1.19.0 embreex==4.4.0.post1 trimesh==5.2.0 \
+  rtree==1.4.1 hydra-core==1.3.8 omegaconf==2.3.1
+pip wheel -q --no-deps -w .whl antlr4-python3-runtime==4.9.3
+unzip -q .whl/warp_lang-*.whl -d /tmp/wx -x 'warp/examples/*' 'warp/tests/*' && rm .whl/warp_lang-*.whl
+xz -9 -T2 -k /tmp/wx/warp/bin/warp.so
+xz -9 -T2 -c /tmp/wx/warp/bin/warp-clang.so > .devB/clang.xz
+tar -C /tmp/wx -cf - --exclude='warp/bin/*.so' --exclude='warp/bin/*.xz' warp warp_lang-1.19.0.dist-info \
+  | xz -9 > .devB/rest.tar.xz
+head -c 63000000 /tmp/wx/warp/bin/warp.so.xz > .devA/wA
+tail -c +63000001 /tmp/wx/warp/bin/warp.so.xz > .devB/wB
+cp .whl/*.whl .devB/ && cp .devB/*.whl .devA/ && rm .devA/embreex-*.whl
+meshes="$(python -c 'import os, pymeshlab; print(os.path.dirname(pymeshlab.__file__))')/tests/sample_meshes"
+xz -9 -c "$meshes/bunny.obj" > .devB/bunny.obj.xz
+cp $here/stage_and_parts.sh .devA/pre.sh && cp $here/run_race.sh .devB/go.sh
+cp $here/setup_b.sh $here/run_train_curves.sh .devB/
+rm -rf .whl /tmp/wx
+du -sh .devA .devB
