@@ -37,14 +37,17 @@ def task(cfg: DictConfig) -> str | float:
     watch_launcher()  # a local_parallel worker stops with its sweep
     hc = HydraConfig.get()
     plain: dict[str, Any] = OmegaConf.to_container(cfg, resolve=True)  # type: ignore[assignment]
-    try:
+    try:  # a setting of the whole command (threads, experiment_name): one line and stop, before any run
         plain["threads"], device = launch.job_settings(plain, hc)
-    except InputError as err:  # a setting of the whole command (threads): stop before any run
+        record = runner.run(plain, choices=dict(hc.runtime.choices), overrides=list(hc.overrides.task), device=device)
+    except InputError as err:
         print(f"ddfbench: {err}", file=sys.stderr)
         sys.exit(1)
-    record = runner.run(plain, choices=dict(hc.runtime.choices), overrides=list(hc.overrides.task), device=device)
-    with open(os.path.join(hc.runtime.output_dir, KEY_FILE), "w") as fh:
-        fh.write(f"{record['experiment']}/{record['key']}\n")
+    try:
+        with open(os.path.join(hc.runtime.output_dir, KEY_FILE), "w") as fh:
+            fh.write(f"{record['experiment']}/{record['key']}\n")
+    except OSError:  # a full disk: the sweep's closing table leaves this job out, the record (if any) stands
+        pass
     if hc.mode == RunMode.MULTIRUN:
         from ddfbench.run.progress import job_finished
 
@@ -147,6 +150,29 @@ def check_extras(args: list[str]) -> None:
                              f"(pip install -e \".[{EXTRA_OF_EXPERIMENT[name][1]}]\")")
 
 
+def check_out_dir(args: list[str]) -> None:
+    """A one-line InputError, before Hydra writes its own files there, when the out_dir the command names (the
+    last `out_dir=`, else conf/config.yaml's `results`) is not a folder that can be made and written."""
+    from ddfbench.core.errors import InputError
+
+    if any(a in ("-h", "--help", "-c", "--cfg", "--info", "--hydra-help") for a in args):  # nothing runs
+        return
+    values = [a.split("=", 1)[1] for a in args if a.startswith(("out_dir=", "+out_dir=", "++out_dir="))]
+    out_dir = values[-1] if values else "results"
+    if "${" in out_dir or "," in out_dir:  # an interpolation or a sweep: each job's runner reports its own
+        return
+    if not out_dir:
+        raise InputError("out_dir='': must name a folder")
+    if os.path.exists(out_dir) and not os.path.isdir(out_dir):
+        raise InputError(f"out_dir={out_dir}: exists and is not a folder")
+    try:
+        os.makedirs(out_dir, exist_ok=True)
+    except OSError as exc:
+        raise InputError(f"out_dir={out_dir}: cannot be made ({exc.strerror or exc})") from None
+    if not os.access(out_dir, os.W_OK | os.X_OK):
+        raise InputError(f"out_dir={out_dir}: cannot be written")
+
+
 def check_threads(args: list[str]) -> None:
     """A one-line InputError for a `threads=` override that is not an integer >= 0 (null or empty: 0), before
     Hydra starts, so that every launcher reports it alike. A sweep, an interpolation and a value Hydra cannot
@@ -175,6 +201,7 @@ def main() -> None:
     try:
         check_extras(sys.argv[1:])
         check_threads(sys.argv[1:])
+        check_out_dir(sys.argv[1:])
         sys.argv[1:] = checked_overrides(sys.argv[1:])
     except InputError as err:
         print(f"ddfbench: {err}", file=sys.stderr)

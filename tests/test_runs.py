@@ -37,9 +37,14 @@ def test_atomic_write_leaves_no_temporary_and_is_strict_json(tmp_path):
     assert "Infinity" not in path.read_text() and data["x"] == "inf" and data["y"][1] == "nan"
 
 
+def record(status: str, **fields) -> dict:
+    """The least a record holds to be read as one (runs.record_problem), with `fields` on top."""
+    return {"status": status, "key": "k", "experiment": "e", "metrics": {}, "cost": {}, "config": {}, **fields}
+
+
 def test_failed_write_keeps_the_old_record(tmp_path):
     path = str(tmp_path / "record.json")
-    runs.write_json_atomic(path, {"status": "ok", "schema_version": runs.SCHEMA_VERSION})
+    runs.write_json_atomic(path, record("ok", schema_version=runs.SCHEMA_VERSION))
 
     class Unserializable:
         pass
@@ -55,11 +60,11 @@ def test_failed_write_keeps_the_old_record(tmp_path):
 def test_is_done_only_for_ok_records_of_this_schema(tmp_path):
     path = str(tmp_path / "record.json")
     assert not runs.is_done(path)
-    runs.write_json_atomic(path, {"status": "failed", "schema_version": runs.SCHEMA_VERSION})
+    runs.write_json_atomic(path, record("failed", schema_version=runs.SCHEMA_VERSION))
     assert not runs.is_done(path)
-    runs.write_json_atomic(path, {"status": "ok", "schema_version": runs.SCHEMA_VERSION - 1})
+    runs.write_json_atomic(path, record("ok", schema_version=runs.SCHEMA_VERSION - 1))
     assert not runs.is_done(path)
-    runs.write_json_atomic(path, {"status": "ok", "schema_version": runs.SCHEMA_VERSION})
+    runs.write_json_atomic(path, record("ok", schema_version=runs.SCHEMA_VERSION))
     assert runs.is_done(path)
     with open(path, "w") as fh:
         fh.write("{ not json")
@@ -95,15 +100,17 @@ def test_a_copied_tree_names_its_commit_through_the_environment(monkeypatch):
 
 
 def test_find_records_names_each_file_that_is_not_a_record(tmp_path, capsys):
-    runs.write_json_atomic(str(tmp_path / "good" / "record.json"), {"key": "good", "status": "ok"})
-    bad = {"truncated": b'{"key": "t", "stat', "latin1": b'{"key": "\xff"}', "list": b"[1, 2]"}
+    runs.write_json_atomic(str(tmp_path / "good" / "record.json"), record("ok", key="good"))
+    bad = {"truncated": b'{"key": "t", "stat', "latin1": b'{"key": "\xff"}', "list": b"[1, 2]",
+           "fields": b'{"status": "ok", "key": "f"}'}
     for name, content in bad.items():
         (tmp_path / name).mkdir()
         (tmp_path / name / "record.json").write_bytes(content)
     assert [r["key"] for r in runs.find_records(str(tmp_path))] == ["good"]
     lines = capsys.readouterr().err.strip().splitlines()
-    assert len(lines) == 3
-    for name, why in (("truncated", "JSONDecodeError"), ("latin1", "UnicodeDecodeError"), ("list", "JSON list")):
+    assert len(lines) == 4
+    for name, why in (("truncated", "JSONDecodeError"), ("latin1", "UnicodeDecodeError"), ("list", "JSON list"),
+                      ("fields", "not a run record: field 'experiment' is missing")):
         (line,) = [ln for ln in lines if str(tmp_path / name / "record.json") in ln]
         assert why in line
     assert runs.read_record(str(tmp_path / "list" / "record.json")) is None  # a rerun writes it anew

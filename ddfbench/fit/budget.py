@@ -1,10 +1,11 @@
 """What bounds a fit: a fixed amount of work (optimizer steps or epochs) or a wall-clock time.
 
 `train.budget` (conf/train/default.yaml) picks one:
-  steps       train.max_steps optimizer steps; no time limit. Repeatable: the same steps on any machine.
+  steps       train.max_steps optimizer steps (null: the model's fit_steps); no time limit. Repeatable: the
+              same steps on any machine.
   epochs      train.max_epochs passes over the labels: ceil(epochs x n_labels / batch) steps, batch from
               the model config (`batch`); no time limit.
-  wall-clock  train.max_seconds of training (or max_steps, whichever ends first): "what do I get in N
+  wall-clock  train.max_seconds of training (or max_steps if set, whichever ends first): "what do I get in N
               seconds" runs. The steps taken vary with the machine and its load, so such records are
               labelled "wall-clock" in the record (fit.budget) and in every table.
 The record's fit.budget is the bound that ended the fit, fit.epochs the passes over the labels it made.
@@ -19,6 +20,7 @@ from typing import Any, Mapping
 from ddfbench.core.errors import InputError
 
 KINDS = ("steps", "epochs", "wall-clock")
+NO_STEP_CAP = 10**12  # wall-clock and epochs with train.max_steps null: the time or the epochs end the fit
 
 
 @dataclass(frozen=True)
@@ -37,20 +39,24 @@ def batch_size(model_cfg: Mapping[str, Any]) -> int | None:
 
 def fit_limit(train_cfg: Mapping[str, Any], model_cfg: Mapping[str, Any], n_labels: int | None) -> FitLimit:
     """The limit a fit runs under, from the train config (see the module docstring)."""
-    kind = str(train_cfg.get("budget", "wall-clock"))
+    kind = str(train_cfg["budget"])
     if kind not in KINDS:
         raise InputError(f"train.budget '{kind}': unknown (steps | epochs | wall-clock)")
+    cap = train_cfg["max_steps"]
     if kind == "steps":
-        return FitLimit(kind, int(train_cfg["max_steps"]), math.inf)
+        if cap is None:  # the model's own fixed work; a family that does not train (mesh, grid SDF) declares none
+            cap = model_cfg["fit_steps"] if model_cfg.get("fit_steps") is not None else 1
+        return FitLimit(kind, int(cap), math.inf)
+    cap = NO_STEP_CAP if cap is None else int(cap)
     if kind == "wall-clock":
-        return FitLimit(kind, int(train_cfg["max_steps"]), float(train_cfg["max_seconds"]))
+        return FitLimit(kind, cap, float(train_cfg["max_seconds"]))
     epochs = train_cfg.get("max_epochs")
     if epochs is None or float(epochs) <= 0:
         raise InputError(f"train.max_epochs {epochs!r}: train.budget=epochs needs a number > 0")
     batch = batch_size(model_cfg)
     if batch is None or not n_labels:
         # families without a batched fit (mesh, grid SDF) build once; the limit does not bind them
-        return FitLimit(kind, int(train_cfg["max_steps"]), math.inf)
+        return FitLimit(kind, cap, math.inf)
     return FitLimit(kind, max(1, math.ceil(float(epochs) * int(n_labels) / batch)), math.inf)
 
 

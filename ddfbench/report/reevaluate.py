@@ -127,12 +127,12 @@ def finished_records(results: str, models: list[str] | None) -> list[dict[str, A
 def unreadable(tool: str, rec: dict[str, Any], err: Exception) -> None:
     """One line on stderr naming the run folder whose artifacts `tool` could not measure, and why."""
     why = (str(err).splitlines() or [""])[0]
-    print(f"ddfbench.{tool}: {rec['_dir']}: {type(err).__name__}: {why}", file=sys.stderr, flush=True)
+    print(f"ddfbench.report.{tool}: {rec['_dir']}: {type(err).__name__}: {why}", file=sys.stderr, flush=True)
 
 
 def measured_header(tool: str, argv: list[str] | None, measured: str, records: list[dict[str, Any]]) -> str:
     """A table's first line: the command, what was measured, the records' code commits and the measuring code's."""
-    command = f"`python -m ddfbench.{tool} {' '.join(argv if argv is not None else sys.argv[1:])}`"
+    command = f"`python -m ddfbench.report.{tool} {' '.join(argv if argv is not None else sys.argv[1:])}`"
     return (f"{command}: {measured}, records of code {', '.join(c[:7] for c in code_commits(records))}, "
             f"measured by code {(code_sha() or 'unknown')[:7]}.")
 

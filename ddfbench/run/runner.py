@@ -16,6 +16,7 @@ from typing import Any, Mapping
 
 import numpy as np
 import torch
+from filelock import FileLock
 
 from ddfbench.core import heap, plugins
 from ddfbench.core.errors import InputError, checked_int, first_line, one_line
@@ -27,7 +28,7 @@ from ddfbench.fit.checkpoint import FILE as CHECKPOINT_FILE
 from ddfbench.fit.checkpoint import Checkpoint, code_fingerprint
 from ddfbench.fit.train import resolve_device, seed_everything, strict_fp32
 from ddfbench.models import load_family
-from ddfbench.run import runs
+from ddfbench.run import checks, runs
 from ddfbench.run.tracking import track_record
 from ddfbench.truth.oracle import Oracle
 from ddfbench.truth.shapes import load_shape
@@ -69,7 +70,7 @@ def _stages(cfg: Mapping[str, Any], rdir: str, device: str, seed: int, out: dict
 
     cost, artifacts = out["cost"], out["artifacts"]
     ev, tr = cfg["eval"], cfg["train"]
-    n_points = checked_int(ev["n_points"], "eval.n_points", 1)  # before the fit, whose probes may use it too
+    n_points = int(ev["n_points"])  # checked with every setting before any work (ddfbench.run.checks)
     shape = load_shape(cfg["shape"])
     out["shape"] = shape.summary()
     oracle = Oracle(shape.mesh, **cfg.get("oracle", {}))
@@ -167,7 +168,11 @@ def run(cfg: Mapping[str, Any], choices: Mapping[str, str] | None = None,
     """Run one job from a resolved config (plain dict); return its record (also written to disk).
 
     The levels the config asks for (capacity, sample_size) are applied first (plugins.job_config), so
-    the record key and the record's config are those of the job as it runs.
+    the record key and the record's config are those of the job as it runs. One process at a time runs a
+    key (a lock file in its run folder): a second launch of the same key waits, then finds the first's record.
+    An experiment_name that is not one safe folder name raises InputError (no record can be placed); a run
+    folder or record that cannot be written (a full disk, out_dir a file) gives a failed record that is
+    returned, not written.
 
     choices: Hydra's config-group choices (the record's `model` label); device: the job's device as
     the launcher gives it (ddfbench.run.launch.job_device); None means train.device.
@@ -178,10 +183,41 @@ def run(cfg: Mapping[str, Any], choices: Mapping[str, str] | None = None,
     except InputError as exc:  # a level the model or sampler lacks: a failed record, keyed on the config as asked
         asked = {k: cfg.get(k) for k in plugins.LEVEL_KEYS.values()}
         cfg, bad_level = {**plugins.job_config({**cfg, **dict.fromkeys(asked)}), **asked}, exc
-    experiment = str(cfg.get("experiment_name", "single"))
+    experiment = checks.safe_name(cfg.get("experiment_name", "single"), "experiment_name")
+    out_dir = str(cfg.get("out_dir", "results"))
     key = runs.config_key(cfg)
-    rdir = runs.run_dir(str(cfg.get("out_dir", "results")), experiment, key)
-    rpath = runs.record_path(str(cfg.get("out_dir", "results")), experiment, key)
+    rdir = runs.run_dir(out_dir, experiment, key)
+    try:
+        os.makedirs(rdir, exist_ok=True)
+        with FileLock(os.path.join(rdir, runs.LOCK_FILE)):
+            return _run_locked(cfg, choices, overrides, device, bad_level, experiment, key, rdir)
+    except OSError as exc:  # nothing of this run could be kept: say so in one line, let a sweep go on
+        record = _new_record(cfg, choices, overrides, experiment, key)
+        record["error"] = f"out_dir={out_dir}: the run's files cannot be written ({one_line(exc)})"
+        log.error("run %s failed: %s", key, record["error"])
+        return record
+
+
+def _new_record(cfg: Mapping[str, Any], choices: Mapping[str, str], overrides: list[str] | None, experiment: str,
+                key: str) -> dict[str, Any]:
+    """A `failed` record of the job with every field of runs.RECORD_FIELDS, to be filled as its stages finish."""
+    scene = dict(cfg.get("scene") or {})
+    return {
+        "schema_version": runs.SCHEMA_VERSION, "key": key, "status": "failed", "error": None,
+        "experiment": experiment, "family": str(cfg.get("model", {}).get("family")),
+        "model": choices.get("model", str(cfg.get("model", {}).get("family"))),
+        "shape": {"name": cfg.get("shape", {}).get("name")}, "sampling": dict(cfg.get("sampling") or {}),
+        "scene": {k: scene.get(k) for k in ("name", "outputs", "width", "height", "spp", "max_depth")},
+        "metrics": {}, "cost": {}, "counts": {}, "artifacts": {}, "flags": [],
+        "config": runs.semantic_config(cfg), "overrides": list(overrides or []), "env": {},
+        "started": _now(), "finished": None,
+    }
+
+
+def _run_locked(cfg: Mapping[str, Any], choices: Mapping[str, str], overrides: list[str] | None, device: str | None,
+                bad_level: InputError | None, experiment: str, key: str, rdir: str) -> dict[str, Any]:
+    """run() once it holds the key's lock: skip a done key, else run every stage and write the record."""
+    rpath = os.path.join(rdir, runs.RECORD_FILE)
     if runs.is_done(rpath) and not cfg.get("force", False):
         log.debug("skip %s: ok record exists (force=true re-runs)", rpath)
         record = runs.read_record(rpath)
@@ -192,17 +228,7 @@ def run(cfg: Mapping[str, Any], choices: Mapping[str, str] | None = None,
         Checkpoint(os.path.join(rdir, CHECKPOINT_FILE)).remove()
     threads = _set_threads(checked_int(cfg.get("threads") or 0, "threads", 0))
     heap_kept = heap.keep_freed_blocks()  # CPU fits reuse their multi-MB activations (ddfbench.core.heap)
-    scene = dict(cfg.get("scene") or {})
-    out: dict[str, Any] = {
-        "schema_version": runs.SCHEMA_VERSION, "key": key, "status": "failed", "error": None,
-        "experiment": experiment, "family": str(cfg.get("model", {}).get("family")),
-        "model": choices.get("model", str(cfg.get("model", {}).get("family"))),
-        "shape": {"name": cfg.get("shape", {}).get("name")}, "sampling": dict(cfg.get("sampling") or {}),
-        "scene": {k: scene.get(k) for k in ("name", "outputs", "width", "height", "spp", "max_depth")},
-        "metrics": {}, "cost": {}, "counts": {}, "artifacts": {}, "flags": [],
-        "config": runs.semantic_config(cfg), "overrides": list(overrides or []), "env": {},
-        "started": _now(), "finished": None,
-    }
+    out = _new_record(cfg, choices, overrides, experiment, key)
     try:
         device = resolve_device(device or str(cfg.get("train", {}).get("device", "cpu")))
         if device.startswith("cuda"):
@@ -210,15 +236,18 @@ def run(cfg: Mapping[str, Any], choices: Mapping[str, str] | None = None,
         out["env"] = {**runs.environment(device, threads), "glibc_heap_kept": heap_kept}
         if bad_level is not None:
             raise bad_level
+        checks.check_job(cfg)  # every setting, before any work
         seed = checked_int(cfg.get("seed", 0), "seed", 0)
         seed_everything(seed)  # a reused worker process starts each run from the same state
         _stages(cfg, rdir, device, seed, out)
         out["status"] = "ok"
     except Exception as exc:  # every failure becomes a record, never a crash mid-sweep
         out["error"] = _record_error(exc)
-        os.makedirs(rdir, exist_ok=True)
-        with open(os.path.join(rdir, "error.log"), "w") as fh:
-            fh.write(traceback.format_exc())
+        try:
+            with open(os.path.join(rdir, "error.log"), "w") as fh:
+                fh.write(traceback.format_exc())
+        except OSError:  # a full disk: the record below says what failed, or run() reports that it cannot
+            pass
         log.error("run %s failed: %s", key, out["error"])
     out["finished"] = _now()
     runs.write_json_atomic(rpath, out)

@@ -37,13 +37,30 @@ def semantic_config(cfg: Mapping[str, Any]) -> dict[str, Any]:
     return {k: v for k, v in cfg.items() if k not in NON_SEMANTIC_KEYS}
 
 
+def input_digests(cfg: Mapping[str, Any]) -> dict[str, str]:
+    """{setting: sha256 of the file's bytes} for every input file the job reads (a user mesh, shape.path) that
+    exists; a missing file is left to the run that reads it (its failed record names it)."""
+    path = (cfg.get("shape") or {}).get("path")
+    if not path or not os.path.isfile(str(path)):
+        return {}
+    h = hashlib.sha256()
+    with open(str(path), "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            h.update(block)
+    return {"shape.path": h.hexdigest()}
+
+
 def config_key(cfg: Mapping[str, Any]) -> str:
-    """16 hex chars: sha256 of the semantic config (canonical JSON) and the schema version."""
-    blob = json.dumps({"schema": SCHEMA_VERSION, "config": semantic_config(cfg)}, sort_keys=True, default=str)
+    """16 hex chars: sha256 of the semantic config (canonical JSON), the schema version and the contents of
+    the job's input files (input_digests: a changed mesh file is a new run)."""
+    inputs = input_digests(cfg)
+    blob = json.dumps({"schema": SCHEMA_VERSION, "config": semantic_config(cfg), **({"inputs": inputs} if inputs else {})},
+                      sort_keys=True, default=str)
     return hashlib.sha256(blob.encode()).hexdigest()[:16]
 
 
 RECORD_FILE = "record.json"  # in each run folder
+LOCK_FILE = "run.lock"  # in each run folder: held while one process runs the key (filelock)
 
 
 def run_dir(out_dir: str, experiment: str, key: str) -> str:
@@ -75,6 +92,7 @@ def write_json_atomic(path: str, data: Mapping[str, Any]) -> None:
     os.makedirs(folder, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=".record.", suffix=".tmp", dir=folder)
     try:
+        os.fchmod(fd, 0o666 & ~_umask())  # readable like every other output (mkstemp makes it 0600)
         with os.fdopen(fd, "w") as fh:
             json.dump(_json_safe(dict(data)), fh, indent=1, allow_nan=False)
             fh.flush()
@@ -84,6 +102,22 @@ def write_json_atomic(path: str, data: Mapping[str, Any]) -> None:
         if os.path.exists(tmp):
             os.unlink(tmp)
         raise
+
+
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+def record_problem(rec: Mapping[str, Any]) -> str | None:
+    """What makes a parsed record.json not a run record (the fields every report and check reads), else None."""
+    if rec.get("status") not in ("ok", "failed"):
+        return f"status {rec.get('status')!r} is not 'ok' or 'failed'"
+    for field, kind in (("key", str), ("experiment", str), ("metrics", dict), ("cost", dict), ("config", dict)):
+        if not isinstance(rec.get(field), kind):
+            return f"field {field!r} is {'missing' if field not in rec else type(rec[field]).__name__}, not a {kind.__name__}"
+    return None
 
 
 def load_record(path: str) -> tuple[dict[str, Any] | None, str | None]:
@@ -97,7 +131,8 @@ def load_record(path: str) -> tuple[dict[str, Any] | None, str | None]:
         return None, f"not a readable JSON file ({one_line(exc)})"
     if not isinstance(rec, dict):
         return None, f"holds a JSON {type(rec).__name__}, not a run record (an object)"
-    return rec, None
+    problem = record_problem(rec)
+    return (None, f"not a run record: {problem}") if problem else (rec, None)
 
 
 def read_record(path: str) -> dict[str, Any] | None:

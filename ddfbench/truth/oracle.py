@@ -43,6 +43,21 @@ def _open3d(what: str):
     return open3d
 
 
+def unit_directions(directions: np.ndarray) -> np.ndarray:
+    """Ray directions (N,3) as float32 unit vectors, so that every backend answers t as a distance; a zero, NaN
+    or inf direction is a one-line InputError."""
+    d = _f32(directions).reshape(-1, 3)
+    norm = np.linalg.norm(d.astype(np.float64), axis=1)
+    bad = ~(np.isfinite(norm) & (norm > 0))
+    if bad.any():
+        raise InputError(f"ray directions: {int(bad.sum())} of {len(d)} are zero, NaN or inf (a ray needs a direction)")
+    off = np.abs(norm - 1.0) > 1e-6  # unit within float32 rounding: kept as given, bit for bit
+    if off.any():
+        d = d.copy()
+        d[off] = (d[off] / norm[off, None]).astype(np.float32)
+    return d
+
+
 def _f32(a: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(a, dtype=np.float32)
 
@@ -110,12 +125,12 @@ class Oracle:
 
     # ---- rays -------------------------------------------------------------------------------
     def first_hit(self, origins: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """First hit of rays (N,3),(N,3) with unit directions.
+        """First hit of rays (N,3),(N,3) (directions made unit: t is a distance).
 
         Returns t (N,) float32 (inf on a miss), triangle id (N,) int64 (-1 on a miss) and the
         geometric face normal (N,3) float32 oriented against the ray (zeros on a miss).
         """
-        directions = _f32(directions).reshape(-1, 3)
+        directions = _f32(directions).reshape(-1, 3)  # _cast makes them unit; the sign of d.n is all used here
         t, tri, normal = self._cast(origins, directions, normals=True)
         facing = np.einsum("ij,ij->i", normal, directions)
         normal *= np.where(facing > 0, np.float32(-1), np.float32(1))[:, None]
@@ -129,6 +144,7 @@ class Oracle:
               normals: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
         """t (N,) float32 and triangle id (N,) int64 of the first hits (inf and -1 on a miss), and with
         `normals` the unit face normal (N,3) float32 as stored (zeros on a miss), else None."""
+        directions = unit_directions(directions)
         n = len(np.reshape(origins, (-1, 3)))
         t = np.full(n, np.inf, np.float32)
         tri = np.full(n, -1, np.int64)
@@ -167,6 +183,7 @@ class Oracle:
         count 2 to 6 times: hits on one ray whose t agree within 1e-6·(1 + t) are one crossing (Warp
         merges them the same way as it counts).
         """
+        directions = unit_directions(directions)
         if self._warp is not None:
             return self._warp.count_crossings(origins, directions)
         out = np.zeros(len(np.reshape(origins, (-1, 3))), np.int64)
@@ -188,6 +205,7 @@ class Oracle:
     def any_hit(self, origins: np.ndarray, directions: np.ndarray) -> np.ndarray:
         """Whether each ray (N,3),(N,3) meets the surface at all (N,) bool: open3d's occlusion test,
         the cheapest query (stops at the first triangle found), or Warp's first hit; embree uses open3d."""
+        directions = unit_directions(directions)
         if self._warp is not None:
             return np.isfinite(self._warp.cast(origins, directions)[0])
         return np.concatenate([self._scene.test_occlusions(rays).numpy() for _, rays in _ray_chunks(origins, directions)]

@@ -7,6 +7,7 @@ float64, so meshes far from the origin (1e7) keep their precision.
 
 from __future__ import annotations
 
+import math
 import os
 from dataclasses import dataclass, field
 from typing import Any, Callable, Mapping
@@ -95,13 +96,19 @@ def validate(mesh: trimesh.Trimesh, label: str) -> tuple[trimesh.Trimesh, list[s
     if f.min() < 0 or f.max() >= len(v):
         raise InputError(f"{label}: faces index vertices that do not exist")
     warnings: list[str] = []
-    extent = float(np.ptp(v[np.unique(f)], axis=0).max())
+    used_v = v[np.unique(f)]
+    offset = float(np.abs(used_v).max())
+    if offset == 0.0:
+        raise InputError(f"{label}: all vertices coincide (zero-size bounding box)")
+    k = math.frexp(offset)[1]
+    u = np.ldexp(v, -k)  # the checks run on v / 2^k, max |u| in [0.5, 1): no overflow near float64's range
+    extent = float(np.ptp(u[np.unique(f)], axis=0).max())  # in units of 2^k
     if extent <= 0.0:
         raise InputError(f"{label}: all vertices coincide (zero-size bounding box)")
-    offset = float(np.abs(v[np.unique(f)]).max())
-    if extent < 1e-12 * max(1.0, offset):
-        raise InputError(f"{label}: extent {extent:g} is too small for its offset {offset:g} (float64 precision lost)")
-    tri = v[f] - v[f].mean(axis=(0, 1))
+    if extent < 1e-12:
+        raise InputError(f"{label}: extent {math.ldexp(extent, k):g} is too small for its offset {offset:g} "
+                         "(float64 precision lost)")
+    tri = u[f] - u[f].mean(axis=(0, 1))
     area2 = np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
     degenerate = area2 <= 1e-12 * extent**2  # faces below ~1e-6 of the extent on a side
     if degenerate.all():
@@ -134,12 +141,16 @@ def validate(mesh: trimesh.Trimesh, label: str) -> tuple[trimesh.Trimesh, list[s
 
 
 def normalize(mesh: trimesh.Trimesh) -> tuple[trimesh.Trimesh, dict[str, Any]]:
-    """Center the bounding box at the origin and scale the longest side to 1 (float64)."""
+    """Center the bounding box at the origin and scale the longest side to 1 (float64, computed on v / 2^k with
+    max|v| / 2^k in [0.5, 1): exact scalings, so the result is the same bits as on v itself, and coordinates near
+    float64's range do not overflow)."""
     v = np.asarray(mesh.vertices, dtype=np.float64)
-    center = 0.5 * (v.min(axis=0) + v.max(axis=0))
-    scale = 1.0 / float(np.ptp(v, axis=0).max())
-    out = trimesh.Trimesh((v - center) * scale, np.asarray(mesh.faces), process=False)
-    return out, {"center": center.tolist(), "scale": scale}
+    k = math.frexp(float(np.abs(v).max()))[1]
+    u = np.ldexp(v, -k)
+    center_u = 0.5 * (u.min(axis=0) + u.max(axis=0))
+    scale_u = 1.0 / float(np.ptp(u, axis=0).max())
+    out = trimesh.Trimesh((u - center_u) * scale_u, np.asarray(mesh.faces), process=False)
+    return out, {"center": np.ldexp(center_u, k).tolist(), "scale": math.ldexp(scale_u, -k)}
 
 
 def load_shape(cfg: Mapping[str, Any]) -> Shape:

@@ -1,0 +1,127 @@
+"""A job's config checked before any work: keys known, numbers finite and in range, path-forming names safe.
+
+Each problem is one InputError line naming the key, the value and what is allowed. The families, samplers and
+scenes check their own sections against their YAML (ddfbench.core.plugins, ddfbench.sampling.params,
+ddfbench.render.scene); this module checks the rest of the job: the top level, `train`, `eval` and `oracle`.
+"""
+
+from __future__ import annotations
+
+import difflib
+import functools
+import math
+import numbers
+import os
+import re
+from typing import Any, Callable, Mapping
+
+from omegaconf import OmegaConf
+
+from ddfbench.core import plugins
+from ddfbench.core.errors import InputError, checked_int
+
+# One path component: a letter or digit first, then letters, digits, '_', '-', '.'; at most 100 characters.
+# Leading dots (., .., .cache, .hydra: the folders ddfbench keeps in out_dir) and separators are refused.
+SAFE_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]{0,99}")
+CHECKED_SECTIONS = ("train", "eval", "oracle")  # the sections of the job config this module owns
+GROUPS = ("shape", "sampling", "model", "train", "scene", "eval", "tracking")  # conf/config.yaml's defaults
+
+
+def safe_name(value: Any, key: str) -> str:
+    """value as one safe path component (SAFE_NAME), else a one-line InputError naming key."""
+    if not isinstance(value, str) or not SAFE_NAME.fullmatch(value) or ".." in value:
+        raise InputError(f"{key}={value!r}: must be one folder name (letters, digits, '_', '-', '.'; a letter or digit "
+                         "first; no '..', '/' or leading dot; at most 100 characters)")
+    return value
+
+
+def _near(key: str, known: list[str]) -> str:
+    close = difflib.get_close_matches(key, known, n=3, cutoff=0.6)
+    return f"did you mean {', '.join(close)}? " if close else ""
+
+
+def _refuse_unknown(label: str, given: Mapping[str, Any], known: set[str]) -> None:
+    for key in sorted(set(given) - known):
+        raise InputError(f"{label}{key}: unknown key ({_near(key, sorted(known))}known: {', '.join(sorted(known))})")
+
+
+@functools.lru_cache(maxsize=None)
+def declared_keys() -> dict[str, frozenset[str]]:
+    """{"": top-level keys, "train" / "eval" / "oracle": their keys}: what conf/config.yaml, the train and eval
+    groups and the experiments (which may add keys of their own, such as `capacity`) declare."""
+    def yaml(*parts: str) -> dict[str, Any]:
+        return OmegaConf.to_container(OmegaConf.load(os.path.join(plugins.CONF_DIR, *parts)), resolve=False)
+
+    config = yaml("config.yaml")
+    out: dict[str, set[str]] = {"": set(config) | set(GROUPS), "oracle": set(config["oracle"])}
+    for section in ("train", "eval"):
+        out[section] = {k for name in plugins.names(section) for k in yaml(section, f"{name}.yaml")}
+    for name in plugins.names("experiment"):
+        experiment = yaml("experiment", f"{name}.yaml")
+        out[""] |= set(experiment)
+        for section in CHECKED_SECTIONS:
+            if isinstance(experiment.get(section), dict):
+                out[section] |= set(experiment[section])
+    out[""] -= {"defaults"}
+    return {k: frozenset(v) for k, v in out.items()}
+
+
+def check_known_keys(cfg: Mapping[str, Any]) -> None:
+    """A `+key=` that nothing reads (at the top level, or in train, eval, oracle) is a one-line InputError that
+    lists the near-miss names."""
+    known = declared_keys()
+    _refuse_unknown("", {k: v for k, v in cfg.items() if k != "hydra"}, set(known[""]))
+    for section in CHECKED_SECTIONS:
+        value = cfg.get(section)
+        if not isinstance(value, Mapping):
+            raise InputError(f"{section}={value!r}: must be a mapping with keys {', '.join(sorted(known[section]))}")
+        _refuse_unknown(f"{section}.", value, set(known[section]))
+
+
+def _number(value: Any, key: str, ok: Callable[[float], bool], allowed: str) -> float:
+    """value as a finite float for which ok holds, else a one-line InputError naming key and what is allowed."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Real) or not math.isfinite(value) or not ok(value):
+        raise InputError(f"{key}={value!r}: must be {allowed}")
+    return float(value)
+
+
+def _get(cfg: Mapping[str, Any], dotted: str) -> Any:
+    section, _, key = dotted.partition(".")
+    return cfg[section][key] if key else cfg[section]
+
+
+# (key, least integer) for whole-number settings; a None value is allowed where the key is in NULLABLE
+INTEGERS = (("seed", 0), ("train.max_steps", 1), ("train.n_labels", 1), ("train.n_probes", 0), ("train.probe_points", 1),
+            ("train.probe_resolution", 2), ("eval.n_points", 1), ("eval.mesh_resolution", 2),
+            ("oracle.occupancy_rays", 1))
+NULLABLE = ("train.max_steps", "train.max_epochs", "train.n_labels")
+
+
+def check_numbers(cfg: Mapping[str, Any]) -> None:
+    """Every numeric setting of the job finite and in range (see INTEGERS and the rules below)."""
+    _number(cfg["domain"], "domain", lambda x: x > 0.5, "a finite number > 0.5 (the field box holds the unit cube)")
+    for key, least in INTEGERS:
+        value = _get(cfg, key)
+        if not (value is None and key in NULLABLE):
+            checked_int(value, key, least)
+    if cfg["train"]["max_epochs"] is not None:
+        _number(cfg["train"]["max_epochs"], "train.max_epochs", lambda x: x > 0, "a finite number > 0 or null")
+    _number(cfg["train"]["max_seconds"], "train.max_seconds", lambda x: x > 0, "a finite number of seconds > 0")
+    radii = cfg["eval"]["radii"]
+    if not isinstance(radii, (list, tuple)) or not radii:
+        raise InputError(f"eval.radii={radii!r}: must be a list of distances > 0")
+    for i, radius in enumerate(radii):
+        _number(radius, f"eval.radii[{i}]", lambda x: x > 0, "a finite distance > 0")
+    model = cfg["model"]
+    for key in ("lr", "lr_d"):
+        if key in model:
+            _number(model[key], f"model.{key}", lambda x: x > 0, "a finite learning rate > 0")
+    if "faces" in model:
+        checked_int(model["faces"] or 0, "model.faces", 0)
+
+
+def check_job(cfg: Mapping[str, Any]) -> None:
+    """Every check of this module, in the order a user would fix them: names, keys, numbers."""
+    safe_name(cfg.get("experiment_name"), "experiment_name")
+    check_known_keys(cfg)
+    check_numbers(cfg)
