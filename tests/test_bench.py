@@ -10,7 +10,7 @@ import time
 import pytest
 import torch
 
-from ddfbench.bench import CUDA_ONLY_BY_DEFAULT, SECTIONS, render_time
+from ddfbench.bench import CUDA_ONLY_BY_DEFAULT, ON_REQUEST, SECTIONS, render_time
 from ddfbench.bench.__main__ import main
 from ddfbench.bench.results import Target, compare
 from ddfbench.bench.timing import measure, measure_side_by_side, precision_context
@@ -29,7 +29,7 @@ def small_run(tmp_path_factory):
 def test_every_section_runs_and_every_ratio_is_finite_positive(small_run):
     code, doc, _ = small_run
     assert code == 0
-    assert list(doc["sections"]) == [s for s in SECTIONS if s not in CUDA_ONLY_BY_DEFAULT]
+    assert list(doc["sections"]) == [s for s in SECTIONS if s not in CUDA_ONLY_BY_DEFAULT + ON_REQUEST]
     assert doc["env"]["device"] == "cpu" and doc["env"]["threads"] >= 1
     for name, sec in doc["sections"].items():
         assert sec["error"] is None, (name, sec["error"])

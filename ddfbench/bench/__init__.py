@@ -14,11 +14,14 @@ same process (DESIGN.md, timing rules). One module per section:
 10. field_cost  points/s of the GAN-SDF generator per eval chunk vs the neural SDF's field, and each
                 network's GFLOP/s vs a dense matrix product
 11. gan_train   the thesis GAN's G+D forward and backward with the family's max pools vs torch's MaxPool1d
+12. crossover   a BVH's time per ray from ~1k to ~4M triangles (the shape decimated and subdivided) against the
+                DDF presets' on the same rays, the count where they meet, each LOD's depth error
 
 Each section module has `run(ctx: Context) -> SectionResult`; timing.py measures, results.py holds
 the rows, sizes.py the problem sizes, table.py writes the outputs.
 """
 
 SECTIONS = ("sampling", "oracle", "ddf", "tracing", "grid", "metrics", "training", "end_to_end", "race", "field_cost",
-            "gan_train")
+            "gan_train", "crossover")
 CUDA_ONLY_BY_DEFAULT = ("race",)  # left out of a --device cpu run unless --only names it
+ON_REQUEST = ("crossover",)  # long (minutes): run only when --only names it

@@ -22,7 +22,7 @@ import time
 import torch
 import yaml
 
-from ddfbench.bench import CUDA_ONLY_BY_DEFAULT, SECTIONS
+from ddfbench.bench import CUDA_ONLY_BY_DEFAULT, ON_REQUEST, SECTIONS
 from ddfbench.bench.context import Context
 from ddfbench.bench.results import SectionResult
 from ddfbench.bench.sizes import SIZES
@@ -101,8 +101,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--warmup", type=int, default=1, help="untimed calls after the cold one")
     ap.add_argument("--threads", type=int, default=0,
                     help="torch threads (0: torch's default); open3d and scipy use every core")
-    ap.add_argument("--only", default=None, help="comma-separated sections to run (default: all; on a CPU device all "
-                    f"but {', '.join(CUDA_ONLY_BY_DEFAULT)})")
+    ap.add_argument("--only", default=None, help="comma-separated sections to run (default: all but "
+                    f"{', '.join(ON_REQUEST)}; on a CPU device also not {', '.join(CUDA_ONLY_BY_DEFAULT)})")
     ap.add_argument("--oracle-backend", default="open3d", choices=("open3d", "warp"),
                     help="the ground truth's backend (warp: every query through Warp, for a machine without open3d)")
     ap.add_argument("--out", default=os.path.join("reports", "bench"), help="folder for the .md and .json")
@@ -113,7 +113,7 @@ def main(argv: list[str] | None = None) -> int:
         device = resolve_device(args.device, "--device")
         sizes = sized(SIZES[args.sizes], args.set)
         sections = parse_sections(args.only if args.only is not None else ",".join(
-            s for s in SECTIONS if device.startswith("cuda") or s not in CUDA_ONLY_BY_DEFAULT))
+            s for s in SECTIONS if s not in ON_REQUEST and (device.startswith("cuda") or s not in CUDA_ONLY_BY_DEFAULT)))
         if args.repeats < 1 or args.warmup < 0 or args.threads < 0:
             raise InputError(f"--repeats {args.repeats} / --warmup {args.warmup} / --threads {args.threads}: "
                              "need repeats >= 1, warmup >= 0, threads >= 0")

@@ -30,9 +30,9 @@ TARGET = Target(">=", 0.8)
 ALL_HIT_BIAS = 20.0  # visibility logit bias: sigmoid(20) = 1 - 2e-9
 
 
-def make_ddf(overrides: dict, device: str) -> DDF:
-    """The ddf preset with overrides, untrained, every ray visible, on `device`."""
-    rep = DDF(preset("model", "ddf", **overrides))
+def make_ddf(overrides: dict, device: str, name: str = "ddf") -> DDF:
+    """The DDF preset `name` (conf/model/<name>.yaml) with overrides, untrained, every ray visible, on `device`."""
+    rep = DDF(preset("model", name, **overrides))
     with torch.no_grad():
         if rep.net.out.out_features > 1:  # visibility head: logit is output 1
             rep.net.out.bias[1] = ALL_HIT_BIAS

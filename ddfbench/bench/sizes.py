@@ -25,6 +25,9 @@ SIZES: dict[str, dict[str, dict]] = {
         "field_cost": {"points": 8192, "chunks": [8, 16, 32, 64, 128, 256, 1024, 4096], "gemm": 2048,
                        "sdf_preset": "neural_sdf_tuned", "gan_preset": "gan_sdf_tuned"},
         "gan_train": {"batch": 1024},  # the thesis preset's batch
+        # the bunny's 56,172 triangles decimated to 1k-16k and subdivided x4, x16, x64 (to 3.6M)
+        "crossover": {"shape": "bunny", "counts": [1000, 4000, 16000, 56172, 224688, 898752, 3595008], "px": 256,
+                      "incoherent_rays": 1 << 18, "models": ["ddf_tuned", "ddf_line_grid_tuned"]},
     },
     "small": {
         "sampling": {"shape": "sphere", "face_mode": "total", "s_fc": 1, "s_dr": 2, "s_p": 2, "bare_rays": 20_000},
@@ -47,5 +50,7 @@ SIZES: dict[str, dict[str, dict]] = {
         "field_cost": {"points": 256, "chunks": [64, 256], "gemm": 128,
                        "sdf_preset": "neural_sdf_tuned", "gan_preset": "gan_sdf_tuned"},
         "gan_train": {"batch": 16},
+        "crossover": {"shape": "sphere", "counts": [500, 2000, 20480], "px": 16, "incoherent_rays": 512,
+                      "models": ["ddf_tuned"]},
     },
 }
