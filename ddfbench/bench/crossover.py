@@ -97,9 +97,23 @@ def run(ctx: Context) -> SectionResult:
             result.details.setdefault(kind, []).append(entry)
     counts = result.details["counts"]
     for kind in ray_sets:
+        bvh = per_ray[("bvh", kind)]
         for name in ddfs:
-            ratios = [b / m for b, m in zip(per_ray[("bvh", kind)], per_ray[(name, kind)])]
+            ratios = [b / m for b, m in zip(bvh, per_ray[(name, kind)])]
+            found = crossover(counts, ratios)
             result.details.setdefault("crossover", {})[f"{name}, {kind}"] = {
-                "triangles": crossover(counts, ratios), "bvh_over_ddf": ratios,
-                "ddf_seconds_per_ray": per_ray[(name, kind)], "bvh_seconds_per_ray": per_ray[("bvh", kind)]}
+                "triangles": found, "bvh_over_ddf": ratios, "ddf_seconds_per_ray": per_ray[(name, kind)],
+                "bvh_seconds_per_ray": bvh}
+            result.notes.append(
+                f"{name}, {kind} rays: BVH / DDF time per ray {ratios[0]:.3g} at {counts[0]:,} triangles to "
+                f"{ratios[-1]:.3g} at {counts[-1]:,}; DDF {min(per_ray[(name, kind)]) * 1e6:.3g}-"
+                f"{max(per_ray[(name, kind)]) * 1e6:.3g} µs a ray, BVH {bvh[0] * 1e6:.3g}-{bvh[-1] * 1e6:.3g} µs; "
+                + (f"crossover at {found:,.0f} triangles" if found else "no crossover in this range"))
+    for i, faces in enumerate(counts):
+        primary = result.details["primary"][i]
+        result.notes.append(
+            f"{faces:,} triangles: BVH build + first cast {primary['bvh']['cold_s']:.3g} s ({len(ray_sets['primary'][0]):,} "
+            f"primary rays); depth MAE against the shape's own mesh {primary['depth_mae']:.2e} (primary), "
+            f"{result.details['incoherent'][i]['depth_mae']:.2e} (incoherent); rays that flip hit/miss "
+            f"{primary['hit_flip_share']:.2%}")
     return result
