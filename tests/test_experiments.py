@@ -86,7 +86,7 @@ def test_the_built_in_plugins_join_the_documented_experiments():
     assert FAMILIES == {"mesh", "grid_sdf", "ddf", "ddf_paper", "neural_sdf", "gan_sdf"}
     assert SAMPLERS == set(plugins.members("sampling", "sampling")) == {"random", "pov", "surface"}
     assert set(plugins.members("model", "default")) == {"mesh", "mesh_lod2000", "mesh_lod500", "grid_sdf",
-                                                        "neural_sdf", "ddf"}
+                                                        "neural_sdf_tuned", "ddf_tuned"}
     # the capacity sweeps take the tuned presets and the papers' presets as written, not the hand-set ones
     for experiment in ("storage", "pareto"):
         assert set(plugins.members("model", experiment)) == {"mesh", "grid_sdf", "ddf_tuned", "ddf_paper",

@@ -8,18 +8,20 @@ import pytest
 
 from ddfbench.run.runs import find_records
 
-FAMILIES = ("mesh", "grid_sdf", "neural_sdf", "ddf", "gan_sdf")  # deterministic on one CPU thread
 BUILT = ("mesh", "grid_sdf")  # built from the exact mesh, not trained
-TINY = ["-m", f"model={','.join(FAMILIES)}", "shape=sphere", "eval=smoke", "eval.n_points=2000",
+LEARNED = ("neural_sdf", "ddf", "gan_sdf")  # trained with batches of 256 labels (the GAN's 1024 costs ~1 s a step)
+FAMILIES = BUILT + LEARNED  # deterministic on one CPU thread
+TINY = ["-m", "shape=sphere", "eval=smoke", "eval.n_points=2000",
         "eval.mesh_resolution=20", "scene=none", "sampling=random", "sampling.n_samples=2000",
         "train.budget=steps", "train.max_steps=15", "train.n_probes=2", "train.probe_points=500", "threads=1",
         "quiet=true"]
 
 
 def sweep(out_dir, *extra):
-    done = subprocess.run([sys.executable, "-m", "ddfbench", *TINY, *extra, f"out_dir={out_dir}"],
-                          capture_output=True, text=True, timeout=600)
-    assert done.returncode == 0, done.stderr[-2000:]
+    for models in (f"model={','.join(BUILT)}", f"model={','.join(LEARNED)} ++model.batch=256"):
+        done = subprocess.run([sys.executable, "-m", "ddfbench", *TINY, *models.split(), *extra, f"out_dir={out_dir}"],
+                              capture_output=True, text=True, timeout=600)
+        assert done.returncode == 0, done.stderr[-2000:]
     return {(r["family"], r["config"]["seed"]): r for r in find_records(str(out_dir))}
 
 
