@@ -1,4 +1,5 @@
-"""A job's config checked before any work: keys known, numbers finite and in range, path-forming names safe.
+"""A job's config checked before any work: keys known, numbers finite and in range, path-forming names safe, the
+model's and the scene's sections against their YAML.
 
 Each problem is one InputError line naming the key, the value and what is allowed. The families, samplers and
 scenes check their own sections against their YAML (ddfbench.core.plugins, ddfbench.sampling.params,
@@ -19,6 +20,8 @@ from omegaconf import OmegaConf
 
 from ddfbench.core import plugins
 from ddfbench.core.errors import InputError, checked_int
+from ddfbench.models import load_family
+from ddfbench.render.scene import parse_scene
 
 # One path component: a letter or digit first, then letters, digits, '_', '-', '.'; at most 100 characters.
 # Leading dots (., .., .cache, .hydra: the folders ddfbench keeps in out_dir) and separators are refused.
@@ -121,7 +124,12 @@ def check_numbers(cfg: Mapping[str, Any]) -> None:
 
 
 def check_job(cfg: Mapping[str, Any]) -> None:
-    """Every check of this module, in the order a user would fix them: names, keys, numbers."""
+    """Every check of this module, in the order a user would fix them: names, keys, numbers; then the model's
+    keys and types against its YAML (Representation.configure; a family may check more of its values there, the
+    DDF does) and the scene's keys and values (render.scene.parse_scene), so that none waits for the fit."""
     safe_name(cfg.get("experiment_name"), "experiment_name")
     check_known_keys(cfg)
     check_numbers(cfg)
+    load_family(str(cfg["model"]["family"])).configure(cfg["model"])
+    if (cfg.get("scene") or {}).get("outputs"):
+        parse_scene(cfg["scene"])
