@@ -1,13 +1,18 @@
-"""`python -m ddfbench.report results/<experiment> [--out reports/<experiment>] [--note TEXT] [--plots K,...]`
+"""`python -m ddfbench.report RECORDS [--out FOLDER] [--note TEXT] [--plots K,...]`
 
-Writes, from the run records below the folder:
+RECORDS is a folder of run records (results/<experiment>) or a compact file (<report>/records.jsonl.gz,
+ddfbench.report.compact); the report goes to --out, by default beside the records (results/<experiment>/report,
+or the compact file's own folder), so that a committed report changes only when --out names it. Writes:
   table.md, table.csv, table.tex   one row per configuration (ddfbench.report.tables)
   runs.csv                         one row per run record (tables.per_run): its key, seed and every metric,
                                    so a report keeps each seed's values after the records are gone
   <kind>.png, <kind>.pdf           the experiment's plots (ddfbench.report.plots: PLOTS_BY_EXPERIMENT)
   gallery.png                      renders beside the oracle's, error maps, meshes (ddfbench.report.gallery)
-  report.md                        the note, the sweep's status (runs done / failed / missing), the
-                                   table, the plots, and every record key the table was built from
+  report.md                        the note, the table, the plots, and every record key the table was built from
+  records.jsonl.gz                 the records themselves, compact (ddfbench.report.compact): the report
+                                   regenerates from them (python -m ddfbench.report.regenerate --from-records)
+  report_options.json              the note and plot kinds the report was written with (for regeneration)
+  sweep_status.md                  from a folder of records: the sweep's runs done / failed / missing
   time_to_floor.md, .csv           convergence: time to reach 2x and 5x the noise floor (report.convergence)
   stability.md, .csv               convergence: how many runs diverged (non-finite, empty mesh, regressed)
   probes.md, .csv                  convergence: every probe of every run (step, epoch, fit s, CD-L2, F-scores)
@@ -25,6 +30,7 @@ table's rows for the claims whose experiments have no records there (marked †)
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import sys
 from collections import Counter
@@ -33,17 +39,21 @@ from typing import Any
 import pandas as pd
 
 from ddfbench.core.errors import InputError
-from ddfbench.report import convergence
-from ddfbench.report.gallery import write_gallery
+from ddfbench.report import compact, convergence
+from ddfbench.report.gallery import GALLERY, write_gallery
 from ddfbench.report.paired import paired_report
 from ddfbench.report.plots import PLOTS, plots_for, write_plots
 from ddfbench.report.tables import per_run, summarize, to_csv, to_latex, to_markdown
-from ddfbench.run.runs import code_commits, find_records
+from ddfbench.run.runs import code_commits
 
 
-def _experiment(records: list[dict[str, Any]], records_dir: str) -> str:
+OPTIONS_FILE = "report_options.json"
+STATUS_FILE = "sweep_status.md"
+
+
+def _experiment(records: list[dict[str, Any]], source: str) -> str:
     names = Counter(str(r.get("experiment")) for r in records)
-    return names.most_common(1)[0][0] if names else os.path.basename(os.path.normpath(records_dir))
+    return names.most_common(1)[0][0] if names else os.path.basename(os.path.normpath(source))
 
 
 def _experiment_file(records: list[dict[str, Any]], experiment: str) -> str:
@@ -108,18 +118,30 @@ def _write_section(out_dir: str, name: str, title: str, rows: list[dict[str, Any
     return text
 
 
-def write_report(records_dir: str, out_dir: str, note: str | None = None,
+def write_report(source: str, out_dir: str, note: str | None = None,
                  kinds: tuple[str, ...] | None = None, sweep: list[str] | None = None,
                  allow_mixed_commits: bool = False) -> str:
-    """Write the tables, plots and report.md for the records below records_dir; return the markdown table.
+    """Write the tables, plots, report.md and the compact records for the records of source (a folder of run
+    records or a compact file); return the markdown table. Every file but the images and sweep_status.md
+    depends on the records and options alone, so the report regenerates byte for byte from its compact file.
     Raises MixedCommits when the records come from several code commits (unless allowed)."""
-    records = find_records(records_dir)
+    records = compact.load_records(source)
     shas = code_commits(records)
     if len(shas) > 1 and not allow_mixed_commits:
-        raise MixedCommits(f"{records_dir}: records from {len(shas)} code commits ({', '.join(shas)}); rerun them "
+        raise MixedCommits(f"{source}: records from {len(shas)} code commits ({', '.join(shas)}); rerun them "
                            "on one commit or pass --allow-mixed-commits")
     df = summarize(records)
     os.makedirs(out_dir, exist_ok=True)
+    if os.path.abspath(source) != os.path.abspath(os.path.join(out_dir, compact.FILE)):
+        compact.write_compact(records, os.path.join(out_dir, compact.FILE))
+    with open(os.path.join(out_dir, OPTIONS_FILE), "w") as fh:
+        json.dump({"note": note, "plots": list(kinds) if kinds is not None else None,
+                   "allow_mixed_commits": allow_mixed_commits}, fh, indent=1)
+        fh.write("\n")
+    if os.path.isdir(source):  # the machine's paths are written as <out_dir>, the folder above the records
+        text = "\n".join(["# Sweep status when the report was written", ""] + _sweep_lines(source, sweep)) + "\n"
+        with open(os.path.join(out_dir, STATUS_FILE), "w") as fh:
+            fh.write(text.replace(os.path.dirname(os.path.abspath(source)), "<out_dir>"))
     md = to_markdown(df)
     with open(os.path.join(out_dir, "table.md"), "w") as fh:
         fh.write(md)
@@ -127,11 +149,11 @@ def write_report(records_dir: str, out_dir: str, note: str | None = None,
         fh.write(to_latex(df))
     to_csv(df, os.path.join(out_dir, "table.csv"))
     per_run(records).to_csv(os.path.join(out_dir, "runs.csv"), index=False)
-    experiment = _experiment(records, records_dir)
+    experiment = _experiment(records, source)
     kind = _experiment_file(records, experiment)
     written = write_plots(records, out_dir, kinds if kinds is not None else plots_for(kind))
-    gallery = write_gallery(records, out_dir, caption=note)
-    written += [gallery] if gallery else []
+    gallery = write_gallery(records, out_dir, caption=note) or os.path.join(out_dir, GALLERY)
+    written += [gallery] if os.path.isfile(gallery) else []  # a compact rebuild keeps the gallery it cannot draw
     pairs = paired_report(kind, records)
     if pairs is not None:
         with open(os.path.join(out_dir, "paired.md"), "w") as fh:
@@ -152,8 +174,9 @@ def write_report(records_dir: str, out_dir: str, note: str | None = None,
         lines += [f"**{note}**", ""]
     if len(shas) > 1:
         lines += [f"**Mixed code commits: {', '.join(shas)}: rows may not be comparable.**", ""]
-    lines += [f"{len(records)} run records from `{records_dir}` (code: {', '.join(shas) or 'unknown'}).", ""]
-    lines += _sweep_lines(records_dir, sweep) + ["", md, "", *information_lines(records)]
+    lines += [f"{len(records)} run records (code: {', '.join(shas) or 'unknown'}), kept in `{compact.FILE}` beside "
+              f"this report.", ""]
+    lines += ["", md, "", *information_lines(records)]
     for part in extra:
         lines += ["", part]
     lines += [f"![{os.path.basename(p)}]({os.path.basename(p)})" for p in written if p.endswith(".png")]
@@ -168,8 +191,10 @@ def write_report(records_dir: str, out_dir: str, note: str | None = None,
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m ddfbench.report", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("records", nargs="?", help="folder of run records, e.g. results/ablation")
-    parser.add_argument("--out", help="report folder (default: reports/<name of the records folder>)")
+    parser.add_argument("records", nargs="?", help="folder of run records (results/ablation) or a compact file "
+                                                     f"(reports/ablation/{compact.FILE})")
+    parser.add_argument("--out", help="report folder (default: beside the records: <folder>/report, or the compact "
+                                      "file's folder)")
     parser.add_argument("--note", help="a line written at the top of report.md (e.g. 'reduced budget: ...')")
     parser.add_argument("--plots", help=f"comma-separated plot kinds ({', '.join(PLOTS)}; 'none' for no plot); "
                                         "default: by the runs' experiment file (+experiment=NAME), else its name")
@@ -194,8 +219,9 @@ def main(argv: list[str] | None = None) -> int:
         from ddfbench.report import status
 
         return status.main(args.records, args.status)
-    if not os.path.isdir(args.records):
-        print(f"ddfbench.report: {args.records}: no such folder of run records", file=sys.stderr)
+    is_compact = args.records.endswith(".jsonl.gz") and os.path.isfile(args.records)
+    if not (os.path.isdir(args.records) or is_compact):
+        print(f"ddfbench.report: {args.records}: no such folder of run records or compact file", file=sys.stderr)
         return 2
     if args.claims:
         from ddfbench.report.claims import write_claims
@@ -216,7 +242,7 @@ def main(argv: list[str] | None = None) -> int:
             print(f"ddfbench.report: --plots {','.join(unknown)}: unknown kind (valid: {', '.join(PLOTS)})",
                   file=sys.stderr)
             return 2
-    out = args.out or os.path.join("reports", os.path.basename(os.path.normpath(args.records)))
+    out = args.out or (os.path.dirname(args.records) if is_compact else os.path.join(args.records, "report"))
     try:
         print(write_report(args.records, out, note=args.note, kinds=kinds, sweep=args.sweep,
                            allow_mixed_commits=args.allow_mixed_commits))

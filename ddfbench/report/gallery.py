@@ -26,7 +26,7 @@ _MESH_COLOUR = np.array([0.85, 0.78, 0.62])
 def _render_png(record: dict[str, Any]) -> str | None:
     """Camera 0's 'oracle | family | error' PNG of the first output in OUTPUTS, or None."""
     renders = (record.get("artifacts") or {}).get("renders")
-    if record.get("status") != "ok" or not renders:
+    if record.get("status") != "ok" or not renders or record.get("_dir") is None:  # None: a compact record
         return None
     folder = os.path.join(record["_dir"], renders)
     for output in OUTPUTS:

@@ -1,4 +1,13 @@
 """`python -m ddfbench.report.regenerate [--only E1,E2] [--results DIR] [--reports DIR] [-- OVERRIDE ...]`
+`python -m ddfbench.report.regenerate --from-records [--reports DIR] [--check]`
+
+--from-records rebuilds every report below --reports that holds its compact records (records.jsonl.gz) from
+those alone, running no fit, with the options it was written with (report_options.json); --check writes into a
+scratch folder instead and exits 1 naming each committed file that differs, byte for byte, from its rebuild
+(text files: .md, .csv, .tex; the images are drawn from the same rows and are not compared; sweep_status.md is
+the state of the machine that ran the sweep). CI runs --check.
+
+Without --from-records:
 
 Regenerates the committed reports: for each experiment (default: tune, ablation, sampling, representations,
 storage, render_time, render_matched, pareto, convergence, paper_ddf) runs `python -m ddfbench +experiment=<e> out_dir=<results> [OVERRIDE ...]`
@@ -16,16 +25,20 @@ A report comes from one code commit: records resumed across a code change are re
 from __future__ import annotations
 
 import argparse
+import filecmp
+import json
 import os
+import shutil
 import subprocess
 import sys
+import tempfile
 import time
 
 from ddfbench.core import plugins
 from ddfbench.fit import tune
-from ddfbench.report import matched
+from ddfbench.report import compact, matched
 from ddfbench.report import tune as tune_report
-from ddfbench.report.__main__ import MixedCommits, write_report
+from ddfbench.report.__main__ import OPTIONS_FILE, STATUS_FILE, MixedCommits, write_report
 from ddfbench.report.claims import write_claims
 
 EXPERIMENTS = ("tune", "ablation", "sampling", "representations", "storage", "render_time", "render_matched", "pareto",
@@ -73,6 +86,58 @@ def regenerate(experiment: str, results: str, reports: str, overrides: list[str]
     return rc
 
 
+COMPARED = (".md", ".csv", ".tex")  # what --check compares byte for byte
+
+
+def reports_with_records(reports: str) -> list[str]:
+    """Every folder below reports (any depth) that holds a compact records file, sorted."""
+    return sorted(folder for folder, _, files in os.walk(reports) if compact.FILE in files)
+
+
+def rebuild(folder: str, into: str) -> None:
+    """Write the report of folder's compact records into `into`, with the options it was written with."""
+    with open(os.path.join(folder, OPTIONS_FILE)) as fh:
+        options = json.load(fh)
+    kinds = tuple(options["plots"]) if options.get("plots") is not None else None
+    write_report(os.path.join(folder, compact.FILE), into, note=options.get("note"), kinds=kinds,
+                 allow_mixed_commits=bool(options.get("allow_mixed_commits")))
+
+
+def differences(committed: str, rebuilt: str) -> list[str]:
+    """The text files (COMPARED) that differ between the two folders or are in only one, by name."""
+    def texts(folder: str) -> set[str]:
+        return {f for f in os.listdir(folder) if f.endswith(COMPARED) and f != STATUS_FILE}
+    names = texts(committed) | texts(rebuilt)
+    return sorted(n for n in names if not (os.path.isfile(os.path.join(committed, n))
+                                           and os.path.isfile(os.path.join(rebuilt, n))
+                                           and filecmp.cmp(os.path.join(committed, n), os.path.join(rebuilt, n),
+                                                           shallow=False)))
+
+
+def from_records(reports: str, check: bool) -> int:
+    """--from-records: rebuild (or, with check, compare) every report below reports that has its records."""
+    folders = reports_with_records(reports)
+    if not folders:
+        print(f"ddfbench.report.regenerate: no {compact.FILE} below {reports}", file=sys.stderr)
+        return 2
+    differing = []
+    for folder in folders:
+        if not check:
+            rebuild(folder, folder)
+            print(f"rebuilt {folder}", flush=True)
+            continue
+        with tempfile.TemporaryDirectory() as scratch:
+            for image in (f for f in os.listdir(folder) if f.endswith((".png", ".pdf"))):  # kept, not compared
+                shutil.copy2(os.path.join(folder, image), scratch)
+            rebuild(folder, scratch)
+            differing += [os.path.join(folder, name) for name in differences(folder, scratch)]
+    for path in differing:
+        print(f"ddfbench.report.regenerate: {path} differs from its rebuild from {compact.FILE}", file=sys.stderr)
+    if check:
+        print(f"checked {len(folders)} report(s) with records: {len(differing)} file(s) differ", flush=True)
+    return 1 if differing else 0
+
+
 def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     overrides = argv[argv.index("--") + 1:] if "--" in argv else []
@@ -84,7 +149,15 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--reports", default="reports", help="report folder (default: reports)")
     parser.add_argument("--note", help="first line of each report (default with overrides: 'reduced budget: ...')")
     parser.add_argument("--report-only", action="store_true", help="write the reports from existing records only")
+    parser.add_argument("--from-records", action="store_true",
+                        help=f"rebuild every report below --reports from its {compact.FILE}, running nothing")
+    parser.add_argument("--check", action="store_true",
+                        help="with --from-records: compare the rebuilds with the committed files, exit 1 on a difference")
     args = parser.parse_args(argv)
+    if args.check and not args.from_records:
+        parser.error("--check goes with --from-records")
+    if args.from_records:
+        return from_records(args.reports, args.check)
     experiments = args.only.split(",") if args.only else list(EXPERIMENTS)
     conf = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "conf", "experiment")
     unknown = [e for e in experiments if not os.path.isfile(os.path.join(conf, f"{e}.yaml"))]

@@ -1,0 +1,72 @@
+"""Compact records: every run record a report was made from, in one gzip JSON-lines file beside the report
+(records.jsonl.gz), so that the report regenerates from the repository alone, on a fresh clone, running no fit.
+
+A compact record is the record.json as written (metrics, costs, fit curves and probes, config, environment), less
+the run folder it was read from; the run folder's artifacts (meshes, renders, the model) stay behind, so what
+needs them (the gallery, the re-measuring tools) is not rebuilt from this file. The file is deterministic: the
+records sorted by (experiment, key), keys sorted, gzip's timestamp 0, so one set of records gives one file.
+
+`python -m ddfbench.report.compact RESULTS/<experiment> OUT.jsonl.gz` writes one from a folder of run records.
+"""
+
+from __future__ import annotations
+
+import argparse
+import gzip
+import json
+import sys
+from typing import Any
+
+from ddfbench.run.runs import find_records, record_problem
+
+FILE = "records.jsonl.gz"
+
+
+def write_compact(records: list[dict[str, Any]], path: str) -> str:
+    """Write the records (as find_records or read_compact give them) to path; return path."""
+    rows = sorted(({k: v for k, v in r.items() if k != "_dir"} for r in records),
+                  key=lambda r: (str(r.get("experiment")), str(r.get("key"))))
+    with open(path, "wb") as raw, gzip.GzipFile(filename="", mode="wb", fileobj=raw, mtime=0) as fh:
+        for row in rows:
+            fh.write((json.dumps(row, sort_keys=True, allow_nan=False) + "\n").encode())
+    return path
+
+
+def read_compact(path: str) -> list[dict[str, Any]]:
+    """The records of a compact file, each with `_dir` None (its run folder is not here). A line that is not a
+    run record is left out with one stderr line naming the file and the line."""
+    out = []
+    with gzip.open(path, "rt", encoding="utf-8") as fh:
+        for number, line in enumerate(fh, 1):
+            try:
+                rec = json.loads(line)
+                problem = record_problem(rec) if isinstance(rec, dict) else f"a JSON {type(rec).__name__}"
+            except json.JSONDecodeError as exc:
+                problem = f"not JSON ({exc.msg})"
+            if problem:
+                print(f"ddfbench: skipped {path} line {number}: {problem}", file=sys.stderr)
+                continue
+            out.append({**rec, "_dir": None})
+    return out
+
+
+def load_records(source: str) -> list[dict[str, Any]]:
+    """The records of a folder of run records (any depth) or of a compact file."""
+    return read_compact(source) if source.endswith(".jsonl.gz") else find_records(source)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m ddfbench.report.compact", description=__doc__.split("\n")[0])
+    parser.add_argument("records", help="folder of run records, e.g. results/default")
+    parser.add_argument("out", help=f"the compact file to write (conventionally <report folder>/{FILE})")
+    args = parser.parse_args(argv)
+    records = find_records(args.records)
+    if not records:
+        print(f"ddfbench.report.compact: {args.records}: no run records", file=sys.stderr)
+        return 2
+    print(f"wrote {len(records)} records to {write_compact(records, args.out)}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,77 @@
+"""Records travel with the reports: the compact file round-trips, a report rebuilt from it alone equals the one
+written from the run folders, and `regenerate --from-records --check` names a committed file that differs."""
+
+import gzip
+import os
+import shutil
+
+import pytest
+
+from ddfbench.report import compact
+from ddfbench.report.__main__ import main as report_main
+from ddfbench.report.regenerate import differences, main as regenerate_main, reports_with_records
+from ddfbench.run import runner
+from tests.hard_cases.conftest import compose
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+
+@pytest.fixture(scope="module")
+def results(tmp_path_factory):
+    """Two finished runs (seeds 0 and 1) of the mesh on the cube and one failed run, in results/single."""
+    out = tmp_path_factory.mktemp("results")
+    for seed in (0, 1):
+        assert runner.run(compose("shape=cube", "model=mesh", f"seed={seed}", out_dir=out))["status"] == "ok"
+    assert runner.run(compose("shape=cube", "model=mesh", "eval.n_points=0", out_dir=out))["status"] == "failed"
+    return out / "single"
+
+
+def test_the_compact_file_round_trips_and_is_deterministic(results, tmp_path):
+    records = compact.load_records(str(results))
+    first = compact.write_compact(records, str(tmp_path / "a.jsonl.gz"))
+    again = compact.read_compact(first)
+    assert [{k: v for k, v in r.items() if k != "_dir"} for r in sorted(records, key=lambda r: r["key"])] == \
+        [{k: v for k, v in r.items() if k != "_dir"} for r in again]
+    assert all(r["_dir"] is None for r in again)
+    second = compact.write_compact(list(reversed(again)), str(tmp_path / "b.jsonl.gz"))
+    assert open(first, "rb").read() == open(second, "rb").read()
+
+
+def test_a_line_that_is_not_a_record_is_named_and_left_out(tmp_path, capsys):
+    path = tmp_path / "r.jsonl.gz"
+    with gzip.open(path, "wt") as fh:
+        fh.write('{"status": "ok"}\nnot json\n[1]\n')
+    assert compact.read_compact(str(path)) == []
+    err = capsys.readouterr().err
+    assert err.count(str(path)) == 3 and "line 2: not JSON" in err
+
+
+def test_a_report_rebuilt_from_its_records_equals_the_written_one(results, tmp_path):
+    assert report_main([str(results), "--out", str(tmp_path / "rep")]) == 0
+    written = tmp_path / "rep"
+    assert (written / compact.FILE).is_file() and (written / "sweep_status.md").is_file()
+    assert str(tmp_path) not in (written / "sweep_status.md").read_text()  # no machine path
+    assert regenerate_main(["--from-records", "--reports", str(tmp_path), "--check"]) == 0
+    rebuilt = tmp_path / "rebuilt"
+    assert report_main([str(written / compact.FILE), "--out", str(rebuilt)]) == 0
+    assert differences(str(written), str(rebuilt)) == []
+
+
+def test_the_check_names_a_hand_edited_table(results, tmp_path, capsys):
+    assert report_main([str(results), "--out", str(tmp_path / "rep")]) == 0
+    table = tmp_path / "rep" / "table.md"
+    table.write_text(table.read_text().replace(" | cube | ", " | cube (edited) | ", 1))
+    assert regenerate_main(["--from-records", "--reports", str(tmp_path), "--check"]) == 1
+    assert f"{table} differs" in capsys.readouterr().err
+
+
+def test_a_report_goes_beside_its_records_unless_out_names_a_folder(results):
+    assert report_main([str(results)]) == 0
+    assert (results / "report" / "report.md").is_file()
+    shutil.rmtree(results / "report")
+
+
+def test_every_committed_report_with_records_regenerates():
+    reports = os.path.join(ROOT, "reports")
+    assert reports_with_records(reports)  # reports/default at least
+    assert regenerate_main(["--from-records", "--reports", reports, "--check"]) == 0
