@@ -30,8 +30,8 @@ def task(cfg: DictConfig) -> str | float:
     """One Hydra job: resolve the config, run it, return the record key (with `objective` set: that
     metric of the record, for an optimizing sweeper)."""
     from ddfbench.core.errors import InputError
-    from ddfbench.report.tables import summarize, to_markdown
-    from ddfbench.run import launch, runner
+    from ddfbench.report.tables import console_table, summarize
+    from ddfbench.run import launch, runner, runs
     from ddfbench.run.worker_guard import watch_launcher
 
     watch_launcher()  # a local_parallel worker stops with its sweep
@@ -54,8 +54,9 @@ def task(cfg: DictConfig) -> str | float:
         if (text := job_finished(os.path.dirname(hc.runtime.output_dir), record)) is not None:
             print(text, flush=True)
     if hc.mode == RunMode.RUN:
-        if not cfg.get("quiet", False):
-            print(to_markdown(summarize([record])))
+        if not cfg.get("quiet", False) and record["status"] == "ok":  # a failure is the one line below
+            folder = runs.run_dir(str(cfg.get("out_dir", "results")), record["experiment"], record["key"])
+            print(console_table(summarize([record])) + f"record: {os.path.join(folder, runs.RECORD_FILE)}")
         if record["status"] != "ok":
             print(f"ddfbench: {record['error']}", file=sys.stderr)
             sys.exit(1)
@@ -80,7 +81,7 @@ class SweepTableCallback(Callback):
                 logging.getLogger(launcher_log).setLevel(logging.WARNING)
 
     def on_multirun_end(self, config: DictConfig, **kwargs: Any) -> None:
-        from ddfbench.report.tables import summarize, to_markdown
+        from ddfbench.report.tables import console_table, summarize
         from ddfbench.run.runs import RECORD_FILE, read_record
 
         sweep_dir, out_dir = str(config.hydra.sweep.dir), str(config.get("out_dir", "results"))
@@ -93,7 +94,9 @@ class SweepTableCallback(Callback):
                 if rec:
                     records.append(rec)
         if records and not config.get("quiet", False):
-            print(to_markdown(summarize(records)))
+            folder = os.path.join(out_dir, str(records[0]["experiment"]))
+            print(console_table(summarize(records)) + f"records: {folder}\n"
+                  f"full table, plots and gallery: python -m ddfbench.report {folder}   (writes {folder}/report)")
 
 
 def wants_default_experiment(args: list[str]) -> bool:
@@ -173,6 +176,27 @@ def check_out_dir(args: list[str]) -> None:
         raise InputError(f"out_dir={out_dir}: cannot be written")
 
 
+def experiment_help(args: list[str]) -> str | None:
+    """`--help` with `+experiment=NAME`: the experiment file's own description (its header comment), what its
+    sweep varies and how many jobs these arguments give; None without an experiment (Hydra's page then)."""
+    names = [a.split("=", 1)[1] for a in args if a.lstrip("+").startswith("experiment=")]
+    if not names:
+        return None
+    from ddfbench.report.status import expected_grid
+
+    path = os.path.join(CONF_DIR, "experiment", f"{names[-1]}.yaml")
+    if not os.path.isfile(path):
+        return None  # Hydra names the missing file
+    with open(path) as fh:
+        header = [line[2:].rstrip() for line in fh if line.startswith("# ") and "@package" not in line]
+    given = [a for a in args if a not in ("-h", "--help") and not a.startswith(("-m", "--multirun"))]
+    jobs, _ = expected_grid(os.path.join(CONF_DIR, "no_records"), given)
+    swept = sorted({o.split("=", 1)[0] for job in jobs for o in job.swept})
+    return "\n".join([f"python -m ddfbench {' '.join(given)}", "", *header, "",
+                      f"sweep over: {', '.join(swept) or 'nothing (one job)'}; {len(jobs)} jobs with these arguments",
+                      "Hydra's own help: --hydra-help"]) + "\n"
+
+
 def check_threads(args: list[str]) -> None:
     """A one-line InputError for a `threads=` override that is not an integer >= 0 (null or empty: 0), before
     Hydra starts, so that every launcher reports it alike. A sweep, an interpolation and a value Hydra cannot
@@ -208,4 +232,7 @@ def main() -> None:
         sys.exit(1)
     if wants_default_experiment(sys.argv[1:]):
         sys.argv.append("+experiment=default")
+    if any(a in ("-h", "--help") for a in sys.argv[1:]) and (text := experiment_help(sys.argv[1:])) is not None:
+        print(text, end="")
+        return
     task()

@@ -63,6 +63,7 @@ def test_bad_mesh_file_fails_cleanly(tmp_path, content, fragment):
     assert out.returncode != 0
     last = out.stderr.strip().splitlines()[-1]
     assert str(path) in last and fragment in last
+    assert (out.stdout + out.stderr).count(fragment) == 1  # one line, no table around it
     (rec,) = records(tmp_path / "res")
     assert rec["status"] == "failed" and str(path) in rec["error"]
     leftovers = [f for _, _, fs in os.walk(tmp_path / "res") for f in fs if f.endswith(".tmp")]

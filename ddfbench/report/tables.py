@@ -319,6 +319,31 @@ def to_markdown(df: pd.DataFrame) -> str:
     return "\n".join(lines) + "\n"
 
 
+CONSOLE_METRICS = ("chamfer_l2", "fscore@0.01", "fit_s", "render_warm_s", "storage_bytes")  # the terminal's few
+
+
+def console_table(df: pd.DataFrame) -> str:
+    """The few columns a terminal shows (model, shape, n, CONSOLE_METRICS: mean, and ± std where it is not 0) in
+    lines of at most about 100 characters; the full table is the report's (to_markdown)."""
+    if df.empty:
+        return "(no records)\n"
+    registry = _metrics()
+    short = {"render_warm_s": "frame s", "storage_bytes": "bytes"}
+    header = ["model", "shape", "n"] + [short.get(m, registry[m].label) for m in CONSOLE_METRICS]
+    rows = []
+    for _, row in df.iterrows():
+        if row["model"] == FLOOR_MODEL:
+            continue
+        cells = [str(row["model"]), str(row["shape"]), _n_cell(row)]
+        for name in CONSOLE_METRICS:
+            mean, std, scale = row[f"{name}_mean"], row[f"{name}_std"], registry[name].scale
+            spread = row["n"] > 1 and math.isfinite(std) and std > 0
+            cells.append(f"{mean * scale:.3g}" + (f"±{std * scale:.1g}" if spread else "") if math.isfinite(mean) else "–")
+        rows.append(cells)
+    widths = [max(len(str(c)) for c in column) for column in zip(header, *rows)]
+    return "\n".join("  ".join(str(c).ljust(w) for c, w in zip(line, widths)).rstrip() for line in [header, *rows]) + "\n"
+
+
 def _tex_escape(text: str) -> str:
     for a, b in (("\\", r"\textbackslash{}"), ("_", r"\_"), ("%", r"\%"), ("&", r"\&"), ("#", r"\#"),
                  ("{", r"\{"), ("}", r"\}"), ("±", r"$\pm$"), ("×10³", r"$\times10^3$"), ("→", r"$\to$"), (TIE, r"$\approx$"),

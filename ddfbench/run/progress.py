@@ -76,6 +76,8 @@ def line(done: int, total: int, record: Mapping[str, Any], elapsed: float) -> st
     fit_s = (record.get("cost") or {}).get("fit_s")
     if isinstance(fit_s, (int, float)):
         parts.append(f"fit {fit_s:.3g} s")
+    if record.get("status") != "ok" and record.get("error"):
+        parts.append(str(record["error"]))
     parts.append(f"elapsed {clock(elapsed)}")
     if done < total:
         parts.append(f"eta {clock(elapsed / done * (total - done))}")

@@ -248,7 +248,7 @@ def _run_locked(cfg: Mapping[str, Any], choices: Mapping[str, str], overrides: l
                 fh.write(traceback.format_exc())
         except OSError:  # a full disk: the record below says what failed, or run() reports that it cannot
             pass
-        log.error("run %s failed: %s", key, out["error"])
+        log.debug("run %s failed: %s", key, out["error"])  # said once: by the CLI (a run) or the progress line (a sweep)
     out["finished"] = _now()
     runs.write_json_atomic(rpath, out)
     if out["status"] == "ok":  # the record holds the fit now. A failed record (rerun by the next sweep) and

@@ -1,0 +1,17 @@
+"""`python -m ddfbench +experiment=NAME --help` describes the experiment: its file's header, what it sweeps and
+how many jobs the given arguments make."""
+
+from ddfbench.cli import experiment_help
+
+
+def test_an_experiments_help_gives_its_description_its_axes_and_its_job_count():
+    text = experiment_help(["+experiment=smoke", "--help"])
+    assert "CI smoke sweep" in text and "@package" not in text
+    assert "sweep over: model, sampling; 18 jobs with these arguments" in text
+    seeds = experiment_help(["+experiment=smoke", "seed=0,1", "-h"])
+    assert "sweep over: model, sampling, seed; 36 jobs" in seeds
+
+
+def test_without_an_experiment_hydra_answers():
+    assert experiment_help(["model=mesh", "--help"]) is None
+    assert experiment_help(["+experiment=no_such_one", "--help"]) is None
