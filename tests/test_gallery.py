@@ -3,7 +3,7 @@
 import numpy as np
 import trimesh
 
-from ddfbench.report.gallery import _BACKGROUND, shaded_mesh_view, write_gallery
+from ddfbench.report.gallery import _BACKGROUND, row_label, shaded_mesh_view, write_gallery
 
 SCENE = {"outputs": ["depth"], "width": 32, "height": 24, "cameras": {"n": 1, "radius": 2.0, "elevation_deg": 0.0, "azimuth_deg": 0.0,
                                                  "fov_deg": 40.0}}
@@ -24,3 +24,11 @@ def test_no_renders_no_gallery(tmp_path):
     records = [{"status": "ok", "model": "mesh", "shape": {"name": "cube"}, "artifacts": {}, "_dir": str(tmp_path)}]
     assert write_gallery(records, str(tmp_path)) is None
     assert not (tmp_path / "gallery.png").exists()
+
+
+def test_a_row_whose_run_gave_no_result_is_marked_not_converged():
+    ok = {"status": "ok", "metrics": {"chamfer_l2": 1e-5, "fscore": {"0.02": 1.0}}}
+    empty = {"status": "ok", "metrics": {"chamfer_l2": 3.0, "empty_reconstruction": True, "fscore": {"0.02": 0.0}}}
+    cells = {("mesh", "bunny"): ok, ("ddf_paper", "bunny"): empty, ("ddf_paper", "cow"): ok}
+    assert row_label("mesh", cells) == "mesh"
+    assert row_label("ddf_paper", cells) == "ddf_paper\n(not converged)"

@@ -40,7 +40,7 @@ import pandas as pd
 
 from ddfbench.core.errors import InputError
 from ddfbench.report import compact, convergence
-from ddfbench.report.gallery import GALLERY, write_gallery
+from ddfbench.report.gallery import CAPTION, GALLERY, write_gallery
 from ddfbench.report.paired import paired_report
 from ddfbench.report.plots import PLOTS, plots_for, write_plots
 from ddfbench.report.tables import per_run, summarize, to_csv, to_latex, to_markdown
@@ -152,7 +152,7 @@ def write_report(source: str, out_dir: str, note: str | None = None,
     experiment = _experiment(records, source)
     kind = _experiment_file(records, experiment)
     written = write_plots(records, out_dir, kinds if kinds is not None else plots_for(kind))
-    gallery = write_gallery(records, out_dir, caption=note) or os.path.join(out_dir, GALLERY)
+    gallery = write_gallery(records, out_dir) or os.path.join(out_dir, GALLERY)
     written += [gallery] if os.path.isfile(gallery) else []  # a compact rebuild keeps the gallery it cannot draw
     pairs = paired_report(kind, records)
     if pairs is not None:
@@ -179,7 +179,8 @@ def write_report(source: str, out_dir: str, note: str | None = None,
     lines += ["", md, "", *information_lines(records)]
     for part in extra:
         lines += ["", part]
-    lines += [f"![{os.path.basename(p)}]({os.path.basename(p)})" for p in written if p.endswith(".png")]
+    for p in (p for p in written if p.endswith(".png")):
+        lines += [f"![{os.path.basename(p)}]({os.path.basename(p)})"] + ([CAPTION, ""] if p == gallery else [])
     lines += ["", "Record keys (config hashes) per row:", ""]
     if not df.empty:
         lines += [f"- {row['model']} {row['shape']}: {row['keys']}" for _, row in df.iterrows()]

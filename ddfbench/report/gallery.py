@@ -4,20 +4,25 @@ One row per model, one column per shape; each cell is four panels from camera 0 
 the oracle's render, the family's render, the per-pixel error map (the run's own renders PNG:
 normals where the scene has them, else depth; error scales in ddfbench/render/images.py) and the
 family's extracted mesh (reconstruction.ply) ray cast from the same camera and shaded by its facet
-normals (a head light). Runs without renders are left out; a report with none gets no gallery.
+normals (a head light). A row whose run gave no result (an empty mesh or one off the shape) says "not
+converged". Runs without renders are left out; a report with none gets no gallery. The figure has a one-line
+title; CAPTION, what a cell shows, goes into the report beside it.
 """
 
 from __future__ import annotations
 
 import os
-import textwrap
 from typing import Any
 
 import numpy as np
 
-from ddfbench.report.records import shape_name
+from ddfbench.report.records import no_result, shape_name
 
 GALLERY = "gallery.png"
+TITLE = "Gallery: oracle | family | error | extracted mesh, camera 0"
+CAPTION = ("Each cell, camera 0: the oracle's render | the family's | the per-pixel error (normals: angle / 45°, "
+           "depth: |Δt| / 0.05; black 0, white ≥ scale) | the extracted mesh shaded from the same camera; one row a "
+           "model (the lowest seed with renders), one column a shape.")
 OUTPUTS = ("normal", "depth")  # the render shown, first found
 _BACKGROUND = np.array([0.18, 0.18, 0.22])
 _MESH_COLOUR = np.array([0.85, 0.78, 0.62])
@@ -94,7 +99,13 @@ def _label(record: dict[str, Any]) -> str:
     return f"CD-L2 {chamfer * 1e3:.3g} ×10⁻³" if isinstance(chamfer, (int, float)) else ""
 
 
-def write_gallery(records: list[dict[str, Any]], out_dir: str, caption: str | None = None) -> str | None:
+def row_label(model: str, cells: dict[tuple[str, str], dict[str, Any]]) -> str:
+    """A row's label: the model, marked "not converged" where a run it shows gave no result (empty or off the shape)."""
+    untrained = any(no_result(rec) for (m, _), rec in cells.items() if m == model)
+    return f"{model}\n(not converged)" if untrained else model
+
+
+def write_gallery(records: list[dict[str, Any]], out_dir: str) -> str | None:
     """Write out_dir/gallery.png from the records that have renders; return its path (None: no renders)."""
     cells = _cells(records)
     if not cells:
@@ -123,11 +134,9 @@ def write_gallery(records: list[dict[str, Any]], out_dir: str, caption: str | No
                 ax.set_title(shape, fontsize=11, fontweight="bold")
             ax.set_xlabel(f"{output}: {_label(rec)}", fontsize=8, labelpad=2)
             if j == 0:
-                ax.set_ylabel(model, fontsize=10)
-    text = ("Each cell, camera 0: oracle render | family render | per-pixel error (normals: angle / 45°, depth: "
-            "|Δt| / 0.05; black 0, white ≥ scale) | extracted mesh shaded from the same camera")
-    width_chars = int(13 * 5.6 * len(shapes))  # about what a 9-point line holds across the figure
-    fig.suptitle("\n".join(textwrap.wrap(text, width_chars) + textwrap.wrap(caption or "", width_chars)), fontsize=9)
+                label = row_label(model, cells)
+                ax.set_ylabel(label, fontsize=10, color="firebrick" if label != model else "black")
+    fig.suptitle(TITLE, fontsize=10)
     path = os.path.join(out_dir, GALLERY)
     fig.savefig(path, dpi=150)
     plt.close(fig)
