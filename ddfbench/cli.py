@@ -160,9 +160,21 @@ def check_out_dir(args: list[str]) -> None:
 
     if any(a in ("-h", "--help", "-c", "--cfg", "--info", "--hydra-help") for a in args):  # nothing runs
         return
-    values = [a.split("=", 1)[1] for a in args if a.startswith(("out_dir=", "+out_dir=", "++out_dir="))]
-    out_dir = values[-1] if values else "results"
-    if "${" in out_dir or "," in out_dir:  # an interpolation or a sweep: each job's runner reports its own
+    from hydra.core.override_parser.overrides_parser import OverridesParser
+    from hydra.errors import HydraException
+
+    out_dir: object = "results"  # conf/config.yaml's
+    for arg in (a for a in args if a.lstrip("+").startswith("out_dir=")):
+        try:  # the value as Hydra reads it ('my results' is my results; null is None)
+            (override,) = OverridesParser.create().parse_overrides([arg])
+        except HydraException:
+            return  # Hydra says what is wrong with it
+        if override.is_sweep_override():
+            return  # a sweep of folders: each job's runner reports its own
+        out_dir = override.value()
+    if not isinstance(out_dir, str):
+        raise InputError(f"out_dir={out_dir!r}: must name a folder")
+    if "${" in out_dir:  # an interpolation: the job's runner reports it
         return
     if not out_dir:
         raise InputError("out_dir='': must name a folder")
@@ -182,6 +194,7 @@ def experiment_help(args: list[str]) -> str | None:
     names = [a.split("=", 1)[1] for a in args if a.lstrip("+").startswith("experiment=")]
     if not names:
         return None
+    from ddfbench.core.errors import InputError
     from ddfbench.report.status import expected_grid
 
     path = os.path.join(CONF_DIR, "experiment", f"{names[-1]}.yaml")
@@ -190,10 +203,13 @@ def experiment_help(args: list[str]) -> str | None:
     with open(path) as fh:
         header = [line[2:].rstrip() for line in fh if line.startswith("# ") and "@package" not in line]
     given = [a for a in args if a not in ("-h", "--help") and not a.startswith(("-m", "--multirun"))]
-    jobs, _ = expected_grid(os.path.join(CONF_DIR, "no_records"), given)
-    swept = sorted({o.split("=", 1)[0] for job in jobs for o in job.swept})
-    return "\n".join([f"python -m ddfbench {' '.join(given)}", "", *header, "",
-                      f"sweep over: {', '.join(swept) or 'nothing (one job)'}; {len(jobs)} jobs with these arguments",
+    try:
+        jobs, _ = expected_grid(os.path.join(CONF_DIR, "no_records"), given)
+        swept = sorted({o.split("=", 1)[0] for job in jobs for o in job.swept})
+        plan = f"sweep over: {', '.join(swept) or 'nothing (one job)'}; {len(jobs)} jobs with these arguments"
+    except InputError as err:  # an optimizing sweeper (tune) or an override the grid cannot expand
+        plan = f"sweep: not expanded here ({err})"
+    return "\n".join([f"python -m ddfbench {' '.join(given)}", "", *header, "", plan,
                       "Hydra's own help: --hydra-help"]) + "\n"
 
 

@@ -136,6 +136,29 @@ def test_extreme_coordinates_normalize_to_the_unit_cube(scale):
     assert np.isfinite(transform["scale"]) and transform["scale"] > 0
 
 
+def test_a_shape_too_small_to_scale_is_refused_by_name():
+    base = trimesh.creation.icosphere(2)
+    with pytest.raises(InputError, match="too small to scale to the unit cube"):
+        validate(trimesh.Trimesh(base.vertices * 1e-305 + 1e-297, base.faces, process=False), "tiny.obj")
+
+
+def test_a_changed_mesh_files_records_say_which_file_they_measured(tmp_path):
+    path = tmp_path / "shape.obj"
+    recs = []
+    for mesh in (trimesh.creation.box(), trimesh.creation.icosphere(1)):
+        mesh.export(path)
+        recs.append(runner.run(compose("shape=file", f"shape.path={path}", "model=mesh", "scene=none",
+                                       out_dir=tmp_path / "out")))
+    assert [r["status"] for r in recs] == ["ok", "ok"] and recs[0]["key"] != recs[1]["key"]
+    assert recs[0]["config"]["inputs"]["shape.path"] != recs[1]["config"]["inputs"]["shape.path"]
+
+
+def test_float64_directions_far_from_unit_are_directions(sphere):
+    o = np.array([[0.0, 0.0, -0.9], [0.0, 0.0, -0.9]])
+    t = Oracle(sphere.mesh).hit_distance(o, np.array([[0.0, 0.0, 1e-50], [0.0, 0.0, 1e39]]))
+    assert np.isfinite(t).all() and t[0] == pytest.approx(t[1])
+
+
 def test_directions_are_made_unit_and_every_backend_agrees(sphere, rng):
     o = rng.uniform(-0.5, 0.5, (256, 3)) * [1, 1, 0] + [0, 0, -0.6]
     d = np.tile([0.0, 0.0, 1.0], (256, 1)) + rng.normal(0, 0.1, (256, 3))

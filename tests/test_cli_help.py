@@ -12,6 +12,11 @@ def test_an_experiments_help_gives_its_description_its_axes_and_its_job_count():
     assert "sweep over: model, sampling, seed; 36 jobs" in seeds
 
 
+def test_an_optimizing_sweep_is_described_without_a_grid():
+    text = experiment_help(["+experiment=tune", "model=ddf", "--help"])
+    assert "sweep: not expanded here" in text and "OptunaSweeper" in text
+
+
 def test_without_an_experiment_hydra_answers():
     assert experiment_help(["model=mesh", "--help"]) is None
     assert experiment_help(["+experiment=no_such_one", "--help"]) is None

@@ -35,22 +35,31 @@ def _reads_cfg(node: ast.AST) -> bool:
     return (isinstance(node, ast.Name) and node.id == "cfg") or (isinstance(node, ast.Attribute) and node.attr == "cfg")
 
 
+def _cfg_get(node: ast.AST) -> bool:
+    """Whether node is a call cfg.get(...) on a config object."""
+    return (isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute) and node.func.attr == "get"
+            and _reads_cfg(node.func.value))
+
+
 def config_reads(source: str, label: str) -> tuple[set[str], list[str]]:
-    """(keys read as cfg["key"], every cfg.get("key", fallback) as 'label:line key') in source."""
+    """(keys read as cfg["key"], every fallback as 'label:line key': cfg.get("key", fallback) and
+    cfg.get("key") or fallback) in source."""
     keys, fallbacks = set(), []
     for node in ast.walk(ast.parse(source)):
+        if isinstance(node, ast.BoolOp) and isinstance(node.op, ast.Or) and _cfg_get(node.values[0]):
+            fallbacks.append(f"{label}:{node.lineno} {ast.unparse(node.values[0].args[0])}")
         if isinstance(node, ast.Subscript) and _reads_cfg(node.value) and isinstance(node.slice, ast.Constant):
             keys.add(node.slice.value)
-        if (isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute) and node.func.attr == "get"
-                and _reads_cfg(node.func.value) and len(node.args) == 2):
+        if _cfg_get(node) and len(node.args) == 2:
             fallbacks.append(f"{label}:{node.lineno} {ast.unparse(node.args[0])}")
     return keys, fallbacks
 
 
 def test_the_reader_finds_reads_and_fallbacks():
-    source = "def f(self, cfg):\n    a = self.cfg['lr']\n    b = cfg.get('batch', 8192)\n    c = cfg.get('x')\n"
+    source = ("def f(self, cfg):\n    a = self.cfg['lr']\n    b = cfg.get('batch', 8192)\n    c = cfg.get('x')\n"
+              "    d = rep.cfg.get('width') or 64\n")
     keys, fallbacks = config_reads(source, "family.py")
-    assert keys == {"lr"} and fallbacks == ["family.py:3 'batch'"]
+    assert keys == {"lr"} and sorted(fallbacks) == ["family.py:3 'batch'", "family.py:5 'width'"]
 
 
 @pytest.mark.parametrize("family", available_families())

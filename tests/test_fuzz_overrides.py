@@ -33,12 +33,15 @@ def nullable(ok):
 
 
 # key -> what a valid value is, written apart from ddfbench.run.checks (the property's oracle)
-VALID = {"domain": real(0.5), "seed": whole(0), "train.max_seconds": real(0.0), "train.max_steps": nullable(whole(1)),
+VALID = {"domain": real(0.5), "seed": whole(0), "threads": nullable(whole(0)), "checkpoint_every": nullable(
+         lambda v: real(-math.inf)(v) and v >= 0), "train.budget": lambda v: v in ("steps", "wall-clock"),  # epochs: no max_epochs here
+         "train.max_seconds": real(0.0), "train.max_steps": nullable(whole(1)),
          "train.max_epochs": nullable(real(0.0)), "train.n_labels": nullable(whole(1)), "train.n_probes": whole(0),
          "train.probe_points": whole(1), "eval.n_points": whole(1), "eval.mesh_resolution": whole(2),
          "oracle.occupancy_rays": whole(1)}
 VALUES = st.one_of(st.none(), st.booleans(), st.integers(-10**9, 10**9), st.floats(allow_nan=True, allow_infinity=True),
-                   st.sampled_from([0, 1, 2, 0.5, 0.6, 1e5, -0.0, 2.5]), st.text(max_size=4))
+                   st.sampled_from([0, 1, 2, 0.5, 0.6, 1e5, -0.0, 2.5, "steps", "epochs", "wall-clock"]),
+                   st.text(max_size=4))
 BASE = compose("shape=cube", "model=mesh", "sampling=random", "sampling.n_samples=2000", out_dir="unused")
 
 

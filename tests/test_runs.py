@@ -39,7 +39,8 @@ def test_atomic_write_leaves_no_temporary_and_is_strict_json(tmp_path):
 
 def record(status: str, **fields) -> dict:
     """The least a record holds to be read as one (runs.record_problem), with `fields` on top."""
-    return {"status": status, "key": "k", "experiment": "e", "metrics": {}, "cost": {}, "config": {}, **fields}
+    return {"status": status, "key": "k", "experiment": "e", "metrics": {}, "cost": {}, "config": {}, "shape": {},
+            **fields}
 
 
 def test_failed_write_keeps_the_old_record(tmp_path):

@@ -243,7 +243,7 @@ def main(argv: list[str] | None = None) -> int:
             print(f"ddfbench.report: --plots {','.join(unknown)}: unknown kind (valid: {', '.join(PLOTS)})",
                   file=sys.stderr)
             return 2
-    out = args.out or (os.path.dirname(args.records) if is_compact else os.path.join(args.records, "report"))
+    out = args.out or (os.path.dirname(os.path.abspath(args.records)) if is_compact else os.path.join(args.records, "report"))
     try:
         print(write_report(args.records, out, note=args.note, kinds=kinds, sweep=args.sweep,
                            allow_mixed_commits=args.allow_mixed_commits))

@@ -96,18 +96,19 @@ def reports_with_records(reports: str) -> list[str]:
 
 def rebuild(folder: str, into: str) -> None:
     """Write the report of folder's compact records into `into`, with the options it was written with."""
-    with open(os.path.join(folder, OPTIONS_FILE)) as fh:
-        options = json.load(fh)
+    options = {}  # a compact file written by report.compact alone: the report's defaults
+    if os.path.isfile(os.path.join(folder, OPTIONS_FILE)):
+        with open(os.path.join(folder, OPTIONS_FILE)) as fh:
+            options = json.load(fh)
     kinds = tuple(options["plots"]) if options.get("plots") is not None else None
     write_report(os.path.join(folder, compact.FILE), into, note=options.get("note"), kinds=kinds,
                  allow_mixed_commits=bool(options.get("allow_mixed_commits")))
 
 
 def differences(committed: str, rebuilt: str) -> list[str]:
-    """The text files (COMPARED) that differ between the two folders or are in only one, by name."""
-    def texts(folder: str) -> set[str]:
-        return {f for f in os.listdir(folder) if f.endswith(COMPARED) and f != STATUS_FILE}
-    names = texts(committed) | texts(rebuilt)
+    """The text files (COMPARED) the rebuild wrote that differ from the committed ones or are not committed, by
+    name (other files of the folder, such as a README.md or another tool's table, are not the report's)."""
+    names = {f for f in os.listdir(rebuilt) if f.endswith(COMPARED) and f != STATUS_FILE}
     return sorted(n for n in names if not (os.path.isfile(os.path.join(committed, n))
                                            and os.path.isfile(os.path.join(rebuilt, n))
                                            and filecmp.cmp(os.path.join(committed, n), os.path.join(rebuilt, n),

@@ -20,6 +20,7 @@ from omegaconf import OmegaConf
 
 from ddfbench.core import plugins
 from ddfbench.core.errors import InputError, checked_int
+from ddfbench.fit.budget import KINDS
 from ddfbench.models import load_family
 from ddfbench.render.scene import parse_scene
 
@@ -94,10 +95,10 @@ def _get(cfg: Mapping[str, Any], dotted: str) -> Any:
 
 
 # (key, least integer) for whole-number settings; a None value is allowed where the key is in NULLABLE
-INTEGERS = (("seed", 0), ("train.max_steps", 1), ("train.n_labels", 1), ("train.n_probes", 0), ("train.probe_points", 1),
+INTEGERS = (("seed", 0), ("threads", 0), ("train.max_steps", 1), ("train.n_labels", 1), ("train.n_probes", 0), ("train.probe_points", 1),
             ("train.probe_resolution", 2), ("eval.n_points", 1), ("eval.mesh_resolution", 2),
             ("oracle.occupancy_rays", 1))
-NULLABLE = ("train.max_steps", "train.max_epochs", "train.n_labels")
+NULLABLE = ("threads", "train.max_steps", "train.max_epochs", "train.n_labels")
 
 
 def check_numbers(cfg: Mapping[str, Any]) -> None:
@@ -110,6 +111,13 @@ def check_numbers(cfg: Mapping[str, Any]) -> None:
     if cfg["train"]["max_epochs"] is not None:
         _number(cfg["train"]["max_epochs"], "train.max_epochs", lambda x: x > 0, "a finite number > 0 or null")
     _number(cfg["train"]["max_seconds"], "train.max_seconds", lambda x: x > 0, "a finite number of seconds > 0")
+    if cfg["train"]["budget"] not in KINDS:
+        raise InputError(f"train.budget={cfg['train']['budget']!r}: must be one of {', '.join(KINDS)}")
+    if cfg["train"]["budget"] == "epochs" and cfg["train"]["max_epochs"] is None:
+        raise InputError("train.max_epochs=None: train.budget=epochs needs a number of epochs > 0")
+    if cfg.get("checkpoint_every") is not None:
+        _number(cfg["checkpoint_every"], "checkpoint_every", lambda x: x >= 0, "a finite number of seconds >= 0 "
+                "(0: no checkpoints)")
     radii = cfg["eval"]["radii"]
     if not isinstance(radii, (list, tuple)) or not radii:
         raise InputError(f"eval.radii={radii!r}: must be a list of distances > 0")
@@ -127,7 +135,7 @@ def check_job(cfg: Mapping[str, Any]) -> None:
     """Every check of this module, in the order a user would fix them: names, keys, numbers; then the model's
     keys and types against its YAML (Representation.configure; a family may check more of its values there, the
     DDF does) and the scene's keys and values (render.scene.parse_scene), so that none waits for the fit."""
-    safe_name(cfg.get("experiment_name"), "experiment_name")
+    safe_name(cfg.get("experiment_name", "single"), "experiment_name")
     check_known_keys(cfg)
     check_numbers(cfg)
     load_family(str(cfg["model"]["family"])).configure(cfg["model"])

@@ -187,6 +187,9 @@ def run(cfg: Mapping[str, Any], choices: Mapping[str, str] | None = None,
     out_dir = str(cfg.get("out_dir", "results"))
     key = runs.config_key(cfg)
     rdir = runs.run_dir(out_dir, experiment, key)
+    rpath = os.path.join(rdir, runs.RECORD_FILE)
+    if runs.is_done(rpath) and not cfg.get("force", False):  # done: read without the lock (a read-only out_dir)
+        return _done(cfg, rpath, rdir)
     try:
         os.makedirs(rdir, exist_ok=True)
         with FileLock(os.path.join(rdir, runs.LOCK_FILE)):
@@ -196,6 +199,14 @@ def run(cfg: Mapping[str, Any], choices: Mapping[str, str] | None = None,
         record["error"] = f"out_dir={out_dir}: the run's files cannot be written ({one_line(exc)})"
         log.error("run %s failed: %s", key, record["error"])
         return record
+
+
+def _done(cfg: Mapping[str, Any], rpath: str, rdir: str) -> dict[str, Any]:
+    """The ok record of a finished key (mirrored to tracking if it is not yet)."""
+    log.debug("skip %s: ok record exists (force=true re-runs)", rpath)
+    record = runs.read_record(rpath)
+    track_record(cfg.get("tracking"), str(cfg.get("out_dir", "results")), record, rdir)  # no-op if logged
+    return record
 
 
 def _new_record(cfg: Mapping[str, Any], choices: Mapping[str, str], overrides: list[str] | None, experiment: str,
@@ -209,27 +220,26 @@ def _new_record(cfg: Mapping[str, Any], choices: Mapping[str, str], overrides: l
         "shape": {"name": cfg.get("shape", {}).get("name")}, "sampling": dict(cfg.get("sampling") or {}),
         "scene": {k: scene.get(k) for k in ("name", "outputs", "width", "height", "spp", "max_depth")},
         "metrics": {}, "cost": {}, "counts": {}, "artifacts": {}, "flags": [],
-        "config": runs.semantic_config(cfg), "overrides": list(overrides or []), "env": {},
+        "config": {**runs.semantic_config(cfg), **({"inputs": digests} if (digests := runs.input_digests(cfg)) else {})},
+        "overrides": list(overrides or []), "env": {},
         "started": _now(), "finished": None,
     }
 
 
 def _run_locked(cfg: Mapping[str, Any], choices: Mapping[str, str], overrides: list[str] | None, device: str | None,
                 bad_level: InputError | None, experiment: str, key: str, rdir: str) -> dict[str, Any]:
-    """run() once it holds the key's lock: skip a done key, else run every stage and write the record."""
+    """run() once it holds the key's lock: skip a key another process finished meanwhile, else run every stage
+    and write the record."""
     rpath = os.path.join(rdir, runs.RECORD_FILE)
     if runs.is_done(rpath) and not cfg.get("force", False):
-        log.debug("skip %s: ok record exists (force=true re-runs)", rpath)
-        record = runs.read_record(rpath)
-        track_record(cfg.get("tracking"), str(cfg.get("out_dir", "results")), record, rdir)  # no-op if logged
-        return record
+        return _done(cfg, rpath, rdir)
 
     if cfg.get("force", False):  # a forced rerun starts its fit over
         Checkpoint(os.path.join(rdir, CHECKPOINT_FILE)).remove()
-    threads = _set_threads(checked_int(cfg.get("threads") or 0, "threads", 0))
     heap_kept = heap.keep_freed_blocks()  # CPU fits reuse their multi-MB activations (ddfbench.core.heap)
     out = _new_record(cfg, choices, overrides, experiment, key)
     try:
+        threads = _set_threads(checked_int(cfg.get("threads") or 0, "threads", 0))
         device = resolve_device(device or str(cfg.get("train", {}).get("device", "cpu")))
         if device.startswith("cuda"):
             strict_fp32()  # a CUDA record computes in float32, as a CPU one
@@ -252,7 +262,10 @@ def _run_locked(cfg: Mapping[str, Any], choices: Mapping[str, str], overrides: l
     out["finished"] = _now()
     runs.write_json_atomic(rpath, out)
     if out["status"] == "ok":  # the record holds the fit now. A failed record (rerun by the next sweep) and
-        Checkpoint(os.path.join(rdir, CHECKPOINT_FILE)).remove()  # a killed process keep it: the rerun resumes
+        try:                    # a killed process keep it: the rerun resumes
+            Checkpoint(os.path.join(rdir, CHECKPOINT_FILE)).remove()
+        except OSError as exc:  # the ok record stands; the stale checkpoint is only disk space
+            log.warning("run %s: its fit checkpoint could not be removed (%s)", key, one_line(exc))
     elif os.path.exists(os.path.join(rdir, CHECKPOINT_FILE)):
         log.info("run %s keeps its fit checkpoint: a rerun by the same code resumes it (force=true fits anew)", key)
     track_record(cfg.get("tracking"), str(cfg.get("out_dir", "results")), out, rdir)

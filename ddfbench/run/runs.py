@@ -44,9 +44,12 @@ def input_digests(cfg: Mapping[str, Any]) -> dict[str, str]:
     if not path or not os.path.isfile(str(path)):
         return {}
     h = hashlib.sha256()
-    with open(str(path), "rb") as fh:
-        for block in iter(lambda: fh.read(1 << 20), b""):
-            h.update(block)
+    try:
+        with open(str(path), "rb") as fh:
+            for block in iter(lambda: fh.read(1 << 20), b""):
+                h.update(block)
+    except OSError:  # unreadable: the run that reads it fails with the file's own error
+        return {}
     return {"shape.path": h.hexdigest()}
 
 
@@ -92,7 +95,7 @@ def write_json_atomic(path: str, data: Mapping[str, Any]) -> None:
     os.makedirs(folder, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=".record.", suffix=".tmp", dir=folder)
     try:
-        os.fchmod(fd, 0o666 & ~_umask())  # readable like every other output (mkstemp makes it 0600)
+        os.fchmod(fd, 0o666 & ~_UMASK)  # readable like every other output (mkstemp makes it 0600)
         with os.fdopen(fd, "w") as fh:
             json.dump(_json_safe(dict(data)), fh, indent=1, allow_nan=False)
             fh.flush()
@@ -104,17 +107,22 @@ def write_json_atomic(path: str, data: Mapping[str, Any]) -> None:
         raise
 
 
-def _umask() -> int:
+def _read_umask() -> int:
+    """The process's umask (read once, at import, before any thread: reading it means setting it)."""
     mask = os.umask(0)
     os.umask(mask)
     return mask
+
+
+_UMASK = _read_umask()
 
 
 def record_problem(rec: Mapping[str, Any]) -> str | None:
     """What makes a parsed record.json not a run record (the fields every report and check reads), else None."""
     if rec.get("status") not in ("ok", "failed"):
         return f"status {rec.get('status')!r} is not 'ok' or 'failed'"
-    for field, kind in (("key", str), ("experiment", str), ("metrics", dict), ("cost", dict), ("config", dict)):
+    for field, kind in (("key", str), ("experiment", str), ("metrics", dict), ("cost", dict), ("config", dict),
+                        ("shape", dict)):
         if not isinstance(rec.get(field), kind):
             return f"field {field!r} is {'missing' if field not in rec else type(rec[field]).__name__}, not a {kind.__name__}"
     return None

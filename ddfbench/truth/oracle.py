@@ -46,15 +46,18 @@ def _open3d(what: str):
 def unit_directions(directions: np.ndarray) -> np.ndarray:
     """Ray directions (N,3) as float32 unit vectors, so that every backend answers t as a distance; a zero, NaN
     or inf direction is a one-line InputError."""
-    d = _f32(directions).reshape(-1, 3)
-    norm = np.linalg.norm(d.astype(np.float64), axis=1)
-    bad = ~(np.isfinite(norm) & (norm > 0))
-    if bad.any():
-        raise InputError(f"ray directions: {int(bad.sum())} of {len(d)} are zero, NaN or inf (a ray needs a direction)")
-    off = np.abs(norm - 1.0) > 1e-6  # unit within float32 rounding: kept as given, bit for bit
-    if off.any():
+    given = np.asarray(directions).reshape(-1, 3)
+    with np.errstate(over="ignore"):  # a float64 beyond float32's range: normalized below from the given value
+        d = _f32(given)
+    off = ~(np.abs(np.einsum("ij,ij->i", d, d) - 1.0) <= 2e-6)  # unit within float32 rounding: kept bit for bit
+    if off.any():  # normalized in float64 from the values as given (a float64 1e-50 or 1e39 is a direction)
+        src = np.asarray(given[off], np.float64)
+        norm = np.linalg.norm(src, axis=1)
+        bad = ~(np.isfinite(norm) & (norm > 0))
+        if bad.any():
+            raise InputError(f"ray directions: {int(bad.sum())} of {len(d)} are zero, NaN or inf (a ray needs a direction)")
         d = d.copy()
-        d[off] = (d[off] / norm[off, None]).astype(np.float32)
+        d[off] = (src / norm[:, None]).astype(np.float32)
     return d
 
 

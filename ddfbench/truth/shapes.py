@@ -108,6 +108,8 @@ def validate(mesh: trimesh.Trimesh, label: str) -> tuple[trimesh.Trimesh, list[s
     if extent < 1e-12:
         raise InputError(f"{label}: extent {math.ldexp(extent, k):g} is too small for its offset {offset:g} "
                          "(float64 precision lost)")
+    if math.ldexp(extent, k) < 1e-300:  # 1 / extent, the scale to the unit cube, would overflow
+        raise InputError(f"{label}: extent {math.ldexp(extent, k):g} is too small to scale to the unit cube")
     tri = u[f] - u[f].mean(axis=(0, 1))
     area2 = np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
     degenerate = area2 <= 1e-12 * extent**2  # faces below ~1e-6 of the extent on a side
