@@ -5,11 +5,11 @@ from ddfbench.cli import experiment_help
 
 
 def test_an_experiments_help_gives_its_description_its_axes_and_its_job_count():
-    text = experiment_help(["+experiment=smoke", "--help"])
-    assert "CI smoke sweep" in text and "@package" not in text
-    assert "sweep over: model, sampling; 18 jobs with these arguments" in text
-    seeds = experiment_help(["+experiment=smoke", "seed=0,1", "-h"])
-    assert "sweep over: model, sampling, seed; 36 jobs" in seeds
+    text = experiment_help(["+experiment=default", "--help"])
+    assert "fixed number of steps" in text and "@package" not in text
+    assert "sweep over: model; 6 jobs with these arguments" in text
+    seeds = experiment_help(["+experiment=default", "seed=0,1", "-h"])
+    assert "sweep over: model, seed; 12 jobs" in seeds
 
 
 def test_an_optimizing_sweep_is_described_without_a_grid():

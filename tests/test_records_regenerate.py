@@ -47,18 +47,18 @@ def test_a_line_that_is_not_a_record_is_named_and_left_out(tmp_path, capsys):
 
 
 def test_a_report_rebuilt_from_its_records_equals_the_written_one(results, tmp_path):
-    assert report_main([str(results), "--out", str(tmp_path / "rep")]) == 0
+    assert report_main([str(results), "--out", str(tmp_path / "rep"), "--plots", "none"]) == 0
     written = tmp_path / "rep"
     assert (written / compact.FILE).is_file() and (written / "sweep_status.md").is_file()
     assert str(tmp_path) not in (written / "sweep_status.md").read_text()  # no machine path
     assert regenerate_main(["--from-records", "--reports", str(tmp_path), "--check"]) == 0
     rebuilt = tmp_path / "rebuilt"
-    assert report_main([str(written / compact.FILE), "--out", str(rebuilt)]) == 0
+    assert report_main([str(written / compact.FILE), "--out", str(rebuilt), "--plots", "none"]) == 0
     assert differences(str(written), str(rebuilt)) == []
 
 
 def test_the_check_names_a_hand_edited_table(results, tmp_path, capsys):
-    assert report_main([str(results), "--out", str(tmp_path / "rep")]) == 0
+    assert report_main([str(results), "--out", str(tmp_path / "rep"), "--plots", "none"]) == 0
     table = tmp_path / "rep" / "table.md"
     table.write_text(table.read_text().replace(" | cube | ", " | cube (edited) | ", 1))
     assert regenerate_main(["--from-records", "--reports", str(tmp_path), "--check"]) == 1
@@ -66,7 +66,7 @@ def test_the_check_names_a_hand_edited_table(results, tmp_path, capsys):
 
 
 def test_a_report_goes_beside_its_records_unless_out_names_a_folder(results):
-    assert report_main([str(results)]) == 0
+    assert report_main([str(results), "--plots", "none"]) == 0
     assert (results / "report" / "report.md").is_file()
     shutil.rmtree(results / "report")
 
