@@ -65,3 +65,11 @@ def test_sweep_prints_one_line_per_job_with_counts(tmp_path, launcher):
     second = subprocess.run(args, capture_output=True, text=True, env=env, timeout=600)
     lines = [ln for ln in second.stdout.splitlines() if ln.startswith("[")]
     assert sorted(ln.split("]")[0] for ln in lines if LINE.match(ln)) == ["[1/2", "[2/2"] and len(lines) == 2
+
+
+def test_a_failed_jobs_line_carries_its_error():
+    from ddfbench.run.progress import line
+
+    rec = {"model": "ddf", "shape": {"name": "cow"}, "status": "failed", "error": "shape file /x.obj: does not exist",
+           "metrics": {}, "cost": {}}
+    assert line(13, 32, rec, 491.0) == "[13/32] ddf cow failed  shape file /x.obj: does not exist  elapsed 8:11  eta 11:58"

@@ -75,3 +75,11 @@ def test_every_committed_report_with_records_regenerates():
     reports = os.path.join(ROOT, "reports")
     assert reports_with_records(reports)  # reports/default at least
     assert regenerate_main(["--from-records", "--reports", reports, "--check"]) == 0
+
+
+def test_the_compact_command_packs_a_folder_of_records(results, tmp_path, capsys):
+    out = tmp_path / "r.jsonl.gz"
+    assert compact.main([str(results), str(out)]) == 0
+    assert "wrote 3 records" in capsys.readouterr().out
+    assert [r["key"] for r in compact.read_compact(str(out))] == sorted(r["key"] for r in compact.load_records(str(results)))
+    assert compact.main([str(tmp_path / "empty"), str(tmp_path / "x.jsonl.gz")]) == 2
