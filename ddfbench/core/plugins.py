@@ -13,6 +13,7 @@ family share one table. Experiments name their sweep lists as
 from __future__ import annotations
 
 import copy
+import difflib
 import functools
 import os
 from typing import Any, Mapping
@@ -111,11 +112,15 @@ def _check_types(label: str, given: Mapping[str, Any], default: Mapping[str, Any
             raise InputError(f"{label}.{key}={value!r}: must be a string")
 
 
-def strict_keys(label: str, given: Mapping[str, Any], known: Mapping[str, Any]) -> None:
-    """One-line InputError naming the first unknown key of `given` and the known keys."""
+def strict_keys(label: str, given: Mapping[str, Any], known: Mapping[str, Any], near: bool = False) -> None:
+    """One-line InputError naming the first unknown key of `given` (as label.key; the key alone for label "") and
+    the known keys; with near, first the known names closest to it ("did you mean max_steps?")."""
     unknown = sorted(set(given) - set(known))
     if unknown:
-        raise InputError(f"{label}.{unknown[0]}: unknown key (known: {', '.join(sorted(known))})")
+        key, names = unknown[0], sorted(known)
+        close = difflib.get_close_matches(key, names, n=3, cutoff=0.6) if near else []
+        hint = f"did you mean {', '.join(close)}? " if close else ""
+        raise InputError(f"{label + '.' if label else ''}{key}: unknown key ({hint}known: {', '.join(names)})")
 
 
 def family_config(family: str, cfg: Mapping[str, Any]) -> dict[str, Any]:

@@ -8,7 +8,6 @@ ddfbench.render.scene); this module checks the rest of the job: the top level, `
 
 from __future__ import annotations
 
-import difflib
 import functools
 import math
 import numbers
@@ -39,16 +38,6 @@ def safe_name(value: Any, key: str) -> str:
     return value
 
 
-def _near(key: str, known: list[str]) -> str:
-    close = difflib.get_close_matches(key, known, n=3, cutoff=0.6)
-    return f"did you mean {', '.join(close)}? " if close else ""
-
-
-def _refuse_unknown(label: str, given: Mapping[str, Any], known: set[str]) -> None:
-    for key in sorted(set(given) - known):
-        raise InputError(f"{label}{key}: unknown key ({_near(key, sorted(known))}known: {', '.join(sorted(known))})")
-
-
 @functools.lru_cache(maxsize=None)
 def declared_keys() -> dict[str, frozenset[str]]:
     """{"": top-level keys, "train" / "eval" / "oracle": their keys}: what conf/config.yaml, the train and eval
@@ -74,12 +63,12 @@ def check_known_keys(cfg: Mapping[str, Any]) -> None:
     """A `+key=` that nothing reads (at the top level, or in train, eval, oracle) is a one-line InputError that
     lists the near-miss names."""
     known = declared_keys()
-    _refuse_unknown("", {k: v for k, v in cfg.items() if k != "hydra"}, set(known[""]))
+    plugins.strict_keys("", {k: v for k, v in cfg.items() if k != "hydra"}, dict.fromkeys(known[""]), near=True)
     for section in CHECKED_SECTIONS:
         value = cfg.get(section)
         if not isinstance(value, Mapping):
             raise InputError(f"{section}={value!r}: must be a mapping with keys {', '.join(sorted(known[section]))}")
-        _refuse_unknown(f"{section}.", value, set(known[section]))
+        plugins.strict_keys(section, value, dict.fromkeys(known[section]), near=True)
 
 
 def _number(value: Any, key: str, ok: Callable[[float], bool], allowed: str) -> float:
