@@ -131,3 +131,9 @@ def test_sample_meshes_from_a_copy_without_pymeshlab(tmp_path, monkeypatch):
     with pytest.raises(InputError, match=SAMPLES_ENV) as err:  # neither pymeshlab nor a copy: say what to set
         load_shape({"name": "bone"})
     assert "\n" not in str(err.value)
+
+
+def test_a_built_in_samples_record_names_no_path_of_the_machine():
+    bunny = load_shape({"name": "bunny"})
+    assert bunny.summary()["source"] == "pymeshlab sample bunny.obj" and os.path.isfile(bunny.source)
+    assert load_shape({"name": "sphere"}).summary()["source"] == "procedural"

@@ -26,7 +26,9 @@ class Shape:
     """A validated, normalized triangle mesh.
 
     mesh:      normalized trimesh (float64 vertices in [-0.5, 0.5]^3).
-    name:      catalog name or file stem; source: the file read (or "procedural").
+    name:      catalog name or file stem; source: the file read (or "procedural"); provenance: what a record
+               names as its source: the user's file as given, a package sample by package and file name (not the
+               machine's install path), or "procedural".
     transform: {"center": [3], "scale": s}: normalized = (original - center) * scale.
     warnings:  what validation repaired (degenerate / duplicate faces, unreferenced vertices...).
     """
@@ -37,11 +39,12 @@ class Shape:
     transform: dict[str, Any]
     watertight: bool
     warnings: list[str] = field(default_factory=list)
+    provenance: str | None = None  # None: source
 
     def summary(self) -> dict[str, Any]:
         return {
             "name": self.name,
-            "source": self.source,
+            "source": self.provenance or self.source,
             "n_vertices": int(len(self.mesh.vertices)),
             "n_faces": int(len(self.mesh.faces)),
             "watertight": bool(self.watertight),
@@ -181,8 +184,9 @@ def load_shape(cfg: Mapping[str, Any]) -> Shape:
         raise InputError(f"shape '{name}': unknown; use shape=file shape.path=... or one of {', '.join(catalog())}")
     mesh, warnings = validate(raw, label)
     mesh, transform = normalize(mesh)
+    provenance = f"pymeshlab sample {PYMESHLAB_SAMPLES[name]}" if name in PYMESHLAB_SAMPLES else None
     return Shape(mesh=mesh, name=name, source=source, transform=transform,
-                 watertight=bool(mesh.is_watertight), warnings=warnings)
+                 watertight=bool(mesh.is_watertight), warnings=warnings, provenance=provenance)
 
 
 def moved(base: str = "cow", offset: float = 1e7, scale: float = 1.0) -> trimesh.Trimesh:
