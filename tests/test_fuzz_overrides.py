@@ -16,7 +16,9 @@ from ddfbench.run import checks, runner, runs
 from tests.hard_cases.conftest import compose
 
 EXAMPLES = int(os.environ.get("DDFBENCH_FUZZ_EXAMPLES", "40"))
-FUZZ = settings(max_examples=EXAMPLES, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+# CI draws the same examples every time (derandomize); a longer local run (the variable set) draws new ones
+FUZZ = settings(max_examples=EXAMPLES, deadline=None, suppress_health_check=[HealthCheck.too_slow],
+                derandomize="DDFBENCH_FUZZ_EXAMPLES" not in os.environ)
 
 
 def whole(least):

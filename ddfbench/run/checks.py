@@ -103,7 +103,7 @@ def check_numbers(cfg: Mapping[str, Any]) -> None:
     if cfg["train"]["budget"] not in KINDS:
         raise InputError(f"train.budget={cfg['train']['budget']!r}: must be one of {', '.join(KINDS)}")
     if cfg["train"]["budget"] == "epochs" and cfg["train"]["max_epochs"] is None:
-        raise InputError("train.max_epochs=None: train.budget=epochs needs a number of epochs > 0")
+        raise InputError("train.budget='epochs': needs train.max_epochs, a number of epochs > 0 (it is null)")
     if cfg.get("checkpoint_every") is not None:
         _number(cfg["checkpoint_every"], "checkpoint_every", lambda x: x >= 0, "a finite number of seconds >= 0 "
                 "(0: no checkpoints)")
