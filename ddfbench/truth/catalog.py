@@ -4,7 +4,8 @@ The bottom of the shape code: nothing here imports ddfbench.truth.shapes (which 
 serves these by name). A builder `(**params) -> trimesh.Trimesh` returns the raw mesh with any defect
 it is meant to carry, so the defect reaches `shapes.validate`. Sizes are in the raw frame; every
 builder keeps the longest side at 1 unless it says otherwise, so thicknesses and gaps survive
-normalization unchanged. The `hard/...` names are the hard-case suite's meshes built to break things:
+normalization unchanged. The CAD-like shapes (bracket, gear, lattice, cup, perforated_plate, chain) are
+built by CSG in ddfbench.truth.cad. The `hard/...` names are the hard-case suite's meshes built to break things:
 
     hard/one_triangle     a single triangle
     hard/thin_plate       a 1 x 1 box of `thickness` (0.02), or of `voxels` grid steps of a
@@ -27,6 +28,7 @@ import trimesh
 
 from ddfbench.core.errors import InputError
 from ddfbench.core.geometry import BOX_HALF
+from ddfbench.truth.cad import CAD_BUILDERS
 
 # name -> file below the pymeshlab sample folder
 PYMESHLAB_SAMPLES = {
@@ -163,6 +165,7 @@ BUILDERS: dict[str, Callable[..., trimesh.Trimesh]] = {
     "hard/plate_pair": plate_pair,
     "hard/dirty_sphere": dirty_sphere,
     "hard/torus_grid": torus_grid,
+    **CAD_BUILDERS,  # bracket, gear, lattice, cup, perforated_plate, chain (ddfbench.truth.cad)
 }
 # short names kept for configs written before the hard-case names (conf/shape/thin_plate.yaml)
 ALIASES = {"thin_plate": "hard/thin_plate"}
