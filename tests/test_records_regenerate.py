@@ -9,7 +9,8 @@ import pytest
 
 from ddfbench.report import compact
 from ddfbench.report.__main__ import main as report_main
-from ddfbench.report.regenerate import differences, main as regenerate_main, reports_with_records
+from ddfbench.report.regenerate import differences, reports_with_records
+from ddfbench.report.regenerate import main as regenerate_main
 from ddfbench.run import runner
 from tests.hard_cases.conftest import compose
 

@@ -39,13 +39,12 @@ from typing import Any
 import pandas as pd
 
 from ddfbench.core.errors import InputError
-from ddfbench.report import compact, convergence
+from ddfbench.report import compact, convergence, shape_suite
 from ddfbench.report.gallery import CAPTION, GALLERY, write_gallery
 from ddfbench.report.paired import paired_report
 from ddfbench.report.plots import PLOTS, plots_for, write_plots
 from ddfbench.report.tables import per_run, summarize, to_csv, to_latex, to_markdown
 from ddfbench.run.runs import code_commits
-
 
 OPTIONS_FILE = "report_options.json"
 STATUS_FILE = "sweep_status.md"
@@ -159,6 +158,8 @@ def write_report(source: str, out_dir: str, note: str | None = None,
         with open(os.path.join(out_dir, "paired.md"), "w") as fh:
             fh.write(pairs)
     extra = [pairs] if pairs is not None else []
+    if kind == "shape_suite":
+        extra += shape_suite.sections(records, out_dir)
     if kind in ("convergence", "paper_ddf", "gan_epochs"):
         rows = convergence.time_to_floor_rows(records)
         extra.append(_write_section(out_dir, "time_to_floor", "Time to reach the noise floor", rows,

@@ -36,7 +36,7 @@ import time
 
 from ddfbench.core import plugins
 from ddfbench.fit import tune
-from ddfbench.report import compact, matched
+from ddfbench.report import compact, matched, shape_suite
 from ddfbench.report import tune as tune_report
 from ddfbench.report.__main__ import OPTIONS_FILE, STATUS_FILE, MixedCommits, write_report
 from ddfbench.report.claims import write_claims
@@ -128,8 +128,9 @@ def from_records(reports: str, check: bool) -> int:
             print(f"rebuilt {folder}", flush=True)
             continue
         with tempfile.TemporaryDirectory() as scratch:
-            for image in (f for f in os.listdir(folder) if f.endswith((".png", ".pdf"))):  # kept, not compared
-                shutil.copy2(os.path.join(folder, image), scratch)
+            # kept, not compared: the images; an input: the suite's measured tags (read, not rewritten)
+            for name in (f for f in os.listdir(folder) if f.endswith((".png", ".pdf")) or f == shape_suite.TAGS_FILE):
+                shutil.copy2(os.path.join(folder, name), scratch)
             rebuild(folder, scratch)
             differing += [os.path.join(folder, name) for name in differences(folder, scratch)]
     for path in differing:

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-PYMESHLAB = "shipped with pymeshlab's tests (the package: GPL-3.0); the package does not name the mesh's own license"
+PYMESHLAB = "pymeshlab test data (the package: GPL-3.0; the mesh's own license is not stated)"
 BUILT = "built by ddfbench (MIT)"
 
 

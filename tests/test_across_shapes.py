@@ -1,0 +1,50 @@
+"""Inference over shapes: the centres and intervals are the hand-derived ones, and no bound leaves its range."""
+
+import math
+
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from ddfbench.report import across_shapes as ax
+
+
+def test_shape_means_average_the_seeds_of_each_shape_and_drop_non_finite_values():
+    pairs = [("bunny", 1.0), ("bunny", 3.0), ("cow", 5.0), ("cow", math.nan), ("cow", None)]
+    assert ax.shape_means(pairs) == {"bunny": 2.0, "cow": 5.0}
+
+
+def test_geometric_mean_and_its_log_t_interval():
+    got = ax.geometric({"a": 1.0, "b": 100.0})
+    assert got.center == pytest.approx(10.0) and got.n == 2
+    # ln values 0 and ln 100: mean ln 10, std ln100 / sqrt 2, t(0.975, 1) = 12.706, half = 12.706 ln100 / 2
+    half = 12.7062047 * math.log(100.0) / 2
+    assert got.lo == pytest.approx(10.0 * math.exp(-half), rel=1e-6)
+    assert got.hi == pytest.approx(10.0 * math.exp(half), rel=1e-6)
+
+
+def test_ratio_is_the_geometric_mean_of_per_shape_ratios_over_shared_shapes():
+    got = ax.ratio({"s1": 2.0, "s2": 8.0, "only_a": 1.0}, {"s1": 1.0, "s2": 2.0})
+    assert got.center == pytest.approx(math.sqrt(8.0)) and got.n == 2
+    assert 0 < got.lo < got.center < got.hi and 0 < got.p <= 1
+
+
+def test_holm_steps_down_and_keeps_the_order():
+    assert ax.holm([0.01, 0.04, 0.03]) == pytest.approx([0.03, 0.06, 0.06])
+    # a p of 0.039, one of three comparisons, is not below 0.05 once corrected
+    assert ax.holm([0.039, 0.2, 0.5])[0] == pytest.approx(0.117)
+    assert math.isnan(ax.holm([math.nan, 0.02])[0]) and ax.holm([math.nan, 0.02])[1] == 0.02
+
+
+@settings(max_examples=60, deadline=None, derandomize=True)
+@given(st.lists(st.floats(0.0, 1.0), min_size=2, max_size=16))
+def test_a_bounded_metric_interval_stays_inside_zero_one(values):
+    got = ax.bounded({f"s{i}": v for i, v in enumerate(values)})
+    assert 0.0 <= got.lo <= got.center <= got.hi <= 1.0
+
+
+@settings(max_examples=60, deadline=None, derandomize=True)
+@given(st.lists(st.floats(1e-9, 1e3), min_size=2, max_size=16))
+def test_a_positive_metric_interval_stays_positive(values):
+    got = ax.geometric({f"s{i}": v for i, v in enumerate(values)})
+    assert 0.0 < got.lo <= got.center * (1 + 1e-12) and got.center <= got.hi * (1 + 1e-12)
