@@ -29,3 +29,14 @@ def random_rays(rng, n, half=0.6):
     o = rng.uniform(-half, half, (n, 3))
     d = rng.normal(size=(n, 3))
     return o, d / np.linalg.norm(d, axis=1, keepdims=True)
+
+
+def pytest_collection_modifyitems(session, config, items):
+    """Files with the most slow-marked tests first, each file's tests in their own order: pytest-xdist's
+    --dist loadfile hands whole files to whichever worker is free, so the longest files starting first keeps one
+    worker from running a long file alone at the end (longest-first scheduling, by the `slow` marker count)."""
+    slow: dict[str, int] = {}
+    for item in items:
+        slow[item.nodeid.split("::")[0]] = slow.get(item.nodeid.split("::")[0], 0) + bool(item.get_closest_marker("slow"))
+    order = {path: rank for rank, path in enumerate(sorted(slow, key=lambda p: -slow[p]))}  # stable: ties keep order
+    items.sort(key=lambda item: order[item.nodeid.split("::")[0]])

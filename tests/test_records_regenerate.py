@@ -84,3 +84,16 @@ def test_the_compact_command_packs_a_folder_of_records(results, tmp_path, capsys
     assert "wrote 3 records" in capsys.readouterr().out
     assert [r["key"] for r in compact.read_compact(str(out))] == sorted(r["key"] for r in compact.load_records(str(results)))
     assert compact.main([str(tmp_path / "empty"), str(tmp_path / "x.jsonl.gz")]) == 2
+
+
+def test_no_committed_report_names_a_folder_of_the_machine_that_ran_it():
+    """Reports write the records' folder as <out_dir>; a path such as /work/res/x or /tmp/x means nothing on a clone."""
+    found = []
+    for folder, _, files in os.walk(os.path.join(ROOT, "reports")):
+        for name in files:
+            if name.endswith((".md", ".csv", ".txt", ".json", ".tex")):
+                with open(os.path.join(folder, name), encoding="utf-8", errors="replace") as fh:
+                    text = fh.read()
+                found += [f"{os.path.relpath(os.path.join(folder, name), ROOT)}: {marker}"
+                          for marker in ("/work/", "/tmp/", "/home/", "/root/") if marker in text]
+    assert not found, found[:10]

@@ -39,7 +39,7 @@ from typing import Any
 import pandas as pd
 
 from ddfbench.core.errors import InputError
-from ddfbench.report import compact, convergence, shape_suite
+from ddfbench.report import compact, convergence, finalists, shape_suite
 from ddfbench.report.gallery import CAPTION, GALLERY, write_gallery
 from ddfbench.report.paired import paired_report
 from ddfbench.report.plots import PLOTS, plots_for, write_plots
@@ -160,6 +160,8 @@ def write_report(source: str, out_dir: str, note: str | None = None,
     extra = [pairs] if pairs is not None else []
     if kind == "shape_suite":
         extra += shape_suite.sections(records, out_dir)
+    if kind == "tune_finalists":
+        extra += finalists.sections(records)
     if kind in ("convergence", "paper_ddf", "gan_epochs"):
         rows = convergence.time_to_floor_rows(records)
         extra.append(_write_section(out_dir, "time_to_floor", "Time to reach the noise floor", rows,

@@ -84,7 +84,7 @@ def ratio(a: Mapping[str, float], b: Mapping[str, float], level: float = LEVEL) 
     if len(logs) == 0:
         return OverShapes(math.nan, math.nan, math.nan, 0)
     center = float(np.exp(logs.mean()))
-    if len(logs) == 1 or logs.std(ddof=1) == 0:
+    if len(logs) == 1 or np.ptp(logs) < 1e-12:  # one shape, or the same ratio on all: no spread to test
         return OverShapes(center, math.nan, math.nan, len(logs))
     half = _t_half(logs, level)
     p = float(_scipy_stats.ttest_1samp(logs, 0.0).pvalue)

@@ -1,0 +1,95 @@
+"""The tuning protocol's verdict (+experiment=tune_finalists): each family's candidates on the tuning shapes, the
+winner, and the winner against the runner-up.
+
+A candidate is a model preset at one of its `tune_finalists` levels (record config `capacity`). Its score is the
+geometric mean over the tuning shapes of its mean CD-L2 over seeds (ddfbench.report.across_shapes); a candidate
+with a run that gave no result on a shape is not converged there and is not eligible. The winner is the eligible
+candidate of lowest score; against the runner-up it is set shape by shape (n = shapes, the honest n for a claim
+about shapes) and run by run (n = shape x seed pairs, tighter but treating seeds as replicates).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+from ddfbench.evaluate.metric_registry import by_name
+from ddfbench.report.across_shapes import OverShapes, geometric, ratio, shape_means
+from ddfbench.report.paired import log_ratio
+from ddfbench.report.records import Record, no_result, ok_records, shape_name
+
+CHAMFER = "chamfer_l2"
+
+
+def candidate(rec: Record) -> tuple[str, str]:
+    """(model, level) of a record."""
+    return str(rec.get("model")), str((rec.get("config") or {}).get("capacity"))
+
+
+def _fmt(s: OverShapes, scale: float = 1.0) -> str:
+    if not math.isfinite(s.center):
+        return "–"
+    bounds = f" [{s.lo * scale:.3g}, {s.hi * scale:.3g}]" if math.isfinite(s.lo) else ""
+    return f"{s.center * scale:.3g}{bounds} (n {s.n})"
+
+
+def candidate_rows(records: list[Record]) -> list[dict[str, Any]]:
+    """Per (model, level): shapes run, shapes not converged, the score over the converged shapes, mean steps."""
+    read = by_name()[CHAMFER].read
+    runs = ok_records(records)
+    rows = []
+    for model, level in sorted(dict.fromkeys(candidate(r) for r in runs)):
+        mine = [r for r in runs if candidate(r) == (model, level)]
+        failed = sorted({shape_name(r) for r in mine if no_result(r)})
+        per_shape = shape_means((shape_name(r), read(r)) for r in mine if shape_name(r) not in failed)
+        rows.append({"model": model, "level": level, "shapes": len({shape_name(r) for r in mine}),
+                     "not_converged": failed, "per_shape": per_shape, "score": geometric(per_shape),
+                     "runs": len(mine), "steps": max(int((r.get("fit") or {}).get("steps") or 0) for r in mine)})
+    return rows
+
+
+def verdicts(records: list[Record], rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """Per model: winner, runner-up, the shape-level and run-level ratio winner / runner-up."""
+    read = by_name()[CHAMFER].read
+    out = []
+    for model in dict.fromkeys(r["model"] for r in rows):
+        eligible = sorted((r for r in rows if r["model"] == model and not r["not_converged"]
+                           and math.isfinite(r["score"].center)), key=lambda r: r["score"].center)
+        if len(eligible) < 2:
+            out.append({"model": model, "winner": eligible[0]["level"] if eligible else None, "runner_up": None})
+            continue
+        win, second = eligible[0], eligible[1]
+
+        def runs_of(level: str) -> dict[tuple, float]:
+            return {(shape_name(r), (r.get("config") or {}).get("seed")): read(r)
+                    for r in ok_records(records) if candidate(r) == (model, level)}
+
+        by_run = log_ratio(runs_of(win["level"]), runs_of(second["level"]))
+        out.append({"model": model, "winner": win["level"], "runner_up": second["level"],
+                    "by_shape": ratio(win["per_shape"], second["per_shape"]),
+                    "by_run": OverShapes(math.exp(by_run.mean), math.exp(by_run.lo), math.exp(by_run.hi), by_run.n)})
+    return out
+
+
+def sections(records: list[Record]) -> list[str]:
+    """The markdown of the candidates' table and the verdicts."""
+    rows = candidate_rows(records)
+    lines = ["## Candidates on the tuning shapes", "",
+             "score: geometric mean over the tuning shapes of the mean CD-L2 ×10³ over seeds, with the t interval of "
+             "the mean log over shapes (n: shapes it converged on). Fixed work: steps as run.", "",
+             "| model | level | score CD-L2 ×10³ [95 %] | runs | steps | not converged on |", "|---|---|---|---|---|---|"]
+    lines += [f"| {r['model']} | {r['level']} | {_fmt(r['score'], 1e3)} | {r['runs']} | {r['steps']:,} | "
+              f"{', '.join(r['not_converged']) or '–'} |" for r in rows]
+    lines += ["", "## Winner against runner-up", "",
+              "Ratio of CD-L2 winner / runner-up: by shape (geometric mean of per-shape ratios of seed means, t "
+              "interval over shapes) and by run (paired shape x seed, t interval over runs). The winner is "
+              "separable from the runner-up when the by-shape interval lies below 1.", "",
+              "| model | winner | runner-up | by shape [95 %] | by run [95 %] | separable |", "|---|---|---|---|---|---|"]
+    for v in verdicts(records, rows):
+        if v["runner_up"] is None:
+            lines.append(f"| {v['model']} | {v['winner'] or 'none converged'} | – | – | – | – |")
+            continue
+        separable = "yes" if math.isfinite(v["by_shape"].hi) and v["by_shape"].hi < 1 else "no"
+        lines.append(f"| {v['model']} | {v['winner']} | {v['runner_up']} | {_fmt(v['by_shape'])} | "
+                     f"{_fmt(v['by_run'])} | {separable} |")
+    return ["\n".join(lines) + "\n"]

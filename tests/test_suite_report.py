@@ -1,0 +1,96 @@
+"""The shape suite's and the tuning protocol's report sections on synthetic records whose answers are known."""
+
+import math
+
+import pandas as pd
+import pytest
+
+from ddfbench.report import finalists, shape_suite
+from ddfbench.report.across_shapes import ratio
+
+
+def rec(model, shape, seed, chamfer, level=None, empty=False, fscore=0.5, steps=100):
+    return {"status": "ok", "model": model, "family": model, "experiment": "shape_suite", "key": f"{model}{shape}{seed}{level}",
+            "shape": {"name": shape}, "config": {"seed": seed, "capacity": level, "eval": {"n_points": 1000}},
+            "metrics": {"chamfer_l2": chamfer, "fscore": {"0.01": fscore, "0.02": 0.0 if empty else 0.9},
+                        "empty_reconstruction": empty},
+            "cost": {"fit_s": 2.0, "storage_bytes": 1000}, "fit": {"steps": steps, "epochs": 1.0}}
+
+
+SHAPES = [f"s{g}" for g in range(6)]
+
+
+@pytest.fixture
+def tags(tmp_path):
+    df = pd.DataFrame({"shape": SHAPES, "split": "evaluation", "kind": "x", "faces": 10,
+                       "thinnest": [0.5, 0.4, 0.3, 0.2, 0.1, None], "genus": range(6), "sharp_edges": 0.0,
+                       "detail": 1.0, "open_boundary": 0.0, "components": 1, "provenance": "p", "license": "l"})
+    df.to_csv(tmp_path / shape_suite.TAGS_FILE, index=False)
+    return df
+
+
+def suite_records():
+    out = []
+    for g, shape in enumerate(SHAPES):
+        for seed in (0, 1):
+            jitter = 1.1 if seed else 1 / 1.1  # seeds around the shape's value: its seed mean is not its value
+            out.append(rec("a", shape, seed, 1e-3 * 2**g * jitter))
+            out.append(rec("b", shape, seed, 1e-3 * 2**g * (2 if g % 2 else 4)))
+    out.append(rec("c", "s0", 0, 1.0, empty=True))
+    out.append(rec("c", "s1", 0, 1e-3))
+    return out
+
+
+def test_per_shape_means_then_geometric_over_shapes_and_ratios_over_shared_shapes(tags):
+    records = suite_records()
+    cells = shape_suite.cells(records, "chamfer_l2")
+    assert cells["a"]["s3"] == pytest.approx(8e-3 * (1.1 + 1 / 1.1) / 2)
+    assert set(cells["c"]) == {"s1"}  # the empty run's shape is not converged and left out
+    got = ratio(cells["a"], cells["b"])
+    # per shape a / b = mean(1.1, 1/1.1) / (4 or 2): geometric mean over 3 shapes of each
+    expected = (1.1 + 1 / 1.1) / 2 / math.sqrt(8)
+    assert got.center == pytest.approx(expected) and got.n == 6
+    assert shape_suite.not_converged(records) == [{"model": "c", "shape": "s0", "failed": 1, "seeds": 1,
+                                                   "steps": 100, "epochs": 1.0}]
+
+
+def test_axis_rows_rank_and_split_at_the_median(tags):
+    rows = {(r["model"], r["axis"]): r for r in shape_suite.axis_rows(suite_records(), tags)}
+    genus = rows[("a", "genus")]
+    assert genus["n"] == 6 and genus["rho"] == pytest.approx(1.0)
+    # harder half genus 3, 4, 5 over easier half 0, 1, 2: 2^(3) in the geometric mean
+    assert genus["ratio"] == pytest.approx(8.0) and genus["lo"] < 8.0 < genus["hi"]
+    thin = rows[("a", "thinnest")]
+    assert thin["n"] == 5 and thin["rho"] == pytest.approx(-1.0)  # the open shape has no thickness
+    assert thin["ratio"] > 1  # thinner is harder: the thin half has the larger chamfer
+    assert all(r["p_holm"] >= r["p"] for r in rows.values() if math.isfinite(r["p"]))
+
+
+def test_sections_write_the_tables_and_the_plot(tags, tmp_path):
+    text = "\n".join(shape_suite.sections(suite_records(), str(tmp_path)))
+    assert "Holm-corrected across the rows" in text and "| c | s0 | 1 of 1 | 100 | 1.0 |" in text
+    assert (tmp_path / "by_axis.png").stat().st_size > 10000 and (tmp_path / "by_axis.csv").exists()
+
+
+def finalist_records():
+    out = []
+    for shape_i, shape in enumerate(("cow", "torus", "gear")):
+        for seed in (0, 1, 2):
+            out.append(rec("m", shape, seed, 1e-3 * (1 + shape_i) * (1 + 0.1 * seed), level="a"))
+            out.append(rec("m", shape, seed, 2e-3 * (1 + shape_i) * (1 + 0.05 * seed), level="b"))
+            # lowest chamfer of all, but empty on the gear: not eligible
+            out.append(rec("m", shape, seed, 1e-4, level="c", empty=shape == "gear" and seed == 1))
+    return out
+
+
+def test_the_winner_is_the_lowest_eligible_candidate_and_is_set_against_the_runner_up():
+    records = finalist_records()
+    rows = finalists.candidate_rows(records)
+    c = next(r for r in rows if r["level"] == "c")
+    assert c["not_converged"] == ["gear"] and c["score"].n == 2
+    (verdict,) = finalists.verdicts(records, rows)
+    assert (verdict["winner"], verdict["runner_up"]) == ("a", "b")
+    # per shape a / b = mean(1, 1.1, 1.2) / (2 mean(1, 1.05, 1.1)) = 1.1 / 2.1, the same on every shape
+    assert verdict["by_shape"].center == pytest.approx(1.1 / 2.1) and verdict["by_shape"].n == 3
+    assert verdict["by_run"].n == 9 and verdict["by_run"].hi < 1
+    assert "| m | a | b |" in finalists.sections(records)[0]
