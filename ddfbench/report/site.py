@@ -1,0 +1,246 @@
+"""`python -m ddfbench.report.site [--reports reports] --out site/`: a static results site from the committed reports.
+
+The site opens from the file system with no server (plotly.js is written once beside the pages):
+
+    index.html        what the site holds, links to every page
+    pareto.html       accuracy (CD-L2) against warm render time, fit time and bytes, one point per run of every
+                      report with compact records (records.jsonl.gz); log axes; per (model, shape) the mean with its
+                      95 % t interval as error bars; hover names experiment, family, preset, shape and seed; a legend
+                      entry per family toggles its points; a shape selector
+    claims.html       reports/claims.md as a table, filterable by verdict
+    gallery.html      every committed gallery.png
+    <report>.html     one page per report folder with a table.csv: its table and its images
+
+Plots are drawn by plotly (a well-kept library), never by hand.
+"""
+
+from __future__ import annotations
+
+import argparse
+import html
+import math
+import os
+import re
+import shutil
+import sys
+
+import numpy as np
+import pandas as pd
+
+from ddfbench.report import compact
+from ddfbench.report.tables import per_run
+
+AXES = (("render_warm_s", "warm render s"), ("fit_s", "fit or build s"), ("storage_bytes", "bytes"))
+PLOTLY_JS = "plotly.min.js"
+STYLE = ("body{font-family:system-ui,sans-serif;margin:1.5em;max-width:1300px}table{border-collapse:collapse;"
+         "font-size:13px}td,th{border:1px solid #ccc;padding:3px 6px}nav a{margin-right:1em}img{max-width:100%}")
+
+
+def page(title: str, body: str, head: str = "") -> str:
+    """A complete HTML page with the site's navigation."""
+    nav = " ".join(f'<a href="{p}.html">{t}</a>' for p, t in (("index", "home"), ("pareto", "Pareto"),
+                                                                ("claims", "claims"), ("gallery", "gallery")))
+    return (f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>{html.escape(title)}</title>"
+            f"<style>{STYLE}</style>{head}</head><body><nav>{nav}</nav><h1>{html.escape(title)}</h1>{body}</body></html>")
+
+
+def runs(reports: str) -> pd.DataFrame:
+    """One row per ok run of every report below `reports` that holds records.jsonl.gz (column `report`: its folder)."""
+    frames = []
+    for folder, _, files in sorted(os.walk(reports)):
+        if compact.FILE in files:
+            df = per_run(compact.read_compact(os.path.join(folder, compact.FILE)))
+            df.insert(0, "report", os.path.relpath(folder, reports))
+            frames.append(df[df["status"] == "ok"])
+    return pd.concat(frames, ignore_index=True) if frames else pd.DataFrame()
+
+
+def pareto_figure(df: pd.DataFrame, x: str, x_label: str):
+    """The figure of CD-L2 x10^3 against column x: per family one trace of runs (legend group = family) and one of
+    (model, shape) means with 95 % t interval bars; a dropdown shows one shape or all."""
+    import plotly.graph_objects as go
+    from scipy import stats as _scipy_stats
+
+    data = df[np.isfinite(df[x].astype(float)) & np.isfinite(df["chamfer_l2"].astype(float))
+              & (df[x].astype(float) > 0) & (df["chamfer_l2"].astype(float) > 0)]
+    fig = go.Figure()
+    shapes = sorted(data["shape"].unique())
+    trace_shapes: list[str] = []
+    for family, fam in data.groupby("family", sort=True):
+        for shape, part in fam.groupby("shape", sort=True):
+            hover = [f"{r.report}: {r.family} / {r.model}<br>shape {r.shape}, seed {r.seed}" for r in part.itertuples()]
+            fig.add_trace(go.Scatter(x=part[x], y=1e3 * part["chamfer_l2"], mode="markers", name=family,
+                                     legendgroup=family, showlegend=shape == fam["shape"].min(), text=hover,
+                                     hoverinfo="text+x+y", marker={"size": 7, "opacity": 0.55},
+                                     meta={"kind": "runs", "family": family, "shape": shape}))
+            trace_shapes.append(shape)
+            means = []
+            for (model, _), cell in part.groupby(["model", "report"], sort=True):
+                y = 1e3 * cell["chamfer_l2"].astype(float)
+                half = (float(_scipy_stats.t.ppf(0.975, len(y) - 1)) * y.std(ddof=1) / math.sqrt(len(y))
+                        if len(y) > 1 else 0.0)
+                means.append((cell[x].astype(float).mean(), y.mean(), half, f"{family} / {model}, {shape}: mean of "
+                              f"{len(y)} seed(s), 95 % t interval"))
+            mx, my, mh, mt = zip(*means)
+            fig.add_trace(go.Scatter(x=mx, y=my, mode="markers", name=family, legendgroup=family, showlegend=False,
+                                     error_y={"type": "data", "array": list(mh), "visible": True}, text=list(mt),
+                                     hoverinfo="text+x+y", marker={"size": 11, "symbol": "diamond-open"},
+                                     meta={"kind": "means", "family": family, "shape": shape}))
+            trace_shapes.append(shape)
+    buttons = [{"label": "all shapes", "method": "restyle", "args": [{"visible": [True] * len(trace_shapes)}]}]
+    buttons += [{"label": s, "method": "restyle", "args": [{"visible": [t == s for t in trace_shapes]}]} for s in shapes]
+    fig.update_layout(xaxis={"type": "log", "title": x_label}, yaxis={"type": "log", "title": "CD-L2 ×10³"},
+                      legend={"groupclick": "togglegroup", "title": "family (click to hide)"}, height=480,
+                      updatemenus=[{"buttons": buttons, "x": 1.0, "y": 1.15, "xanchor": "right"}],
+                      margin={"t": 60}, title=f"accuracy against {x_label}")
+    return fig
+
+
+def write_pareto(df: pd.DataFrame, out: str) -> int:
+    """pareto.html with one figure per axis that any run has; returns the number of run points plotted."""
+    parts, points = [], 0
+    for x, label in AXES:
+        if x not in df or not np.isfinite(df[x].astype(float)).any():
+            continue
+        fig = pareto_figure(df, x, label)
+        points += sum(len(t.x) for t in fig.data if t.meta["kind"] == "runs")
+        parts.append(fig.to_html(full_html=False, include_plotlyjs=False, div_id=f"pareto-{x}"))
+    body = (f"<p>One small point per run ({len(df)} runs of the reports with records: "
+            f"{html.escape(', '.join(sorted(df['report'].unique())) if len(df) else 'none')}); diamonds: the mean per "
+            "preset and shape with its 95 % t interval. Lower left is better.</p>" + "".join(parts))
+    with open(os.path.join(out, "pareto.html"), "w") as fh:
+        fh.write(page("Accuracy against cost", body, head=f"<script src='{PLOTLY_JS}'></script>"))
+    return points
+
+
+def markdown_table(md: str) -> pd.DataFrame:
+    """The first pipe table of a markdown text as a DataFrame of strings (bold marks and backticks dropped)."""
+    lines = [ln for ln in md.splitlines() if ln.startswith("|")]
+    if len(lines) < 2:
+        return pd.DataFrame()
+
+    def cells(line: str) -> list[str]:
+        return [re.sub(r"\*\*|`", "", c).strip() for c in line.strip().strip("|").split(" | ")]
+
+    header = cells(lines[0])
+    return pd.DataFrame([c for c in map(cells, lines[2:]) if len(c) == len(header)], columns=header)
+
+
+def write_claims(reports: str, out: str) -> None:
+    """claims.html: the claims table with a verdict filter."""
+    path = os.path.join(reports, "claims.md")
+    table = markdown_table(open(path).read()) if os.path.isfile(path) else pd.DataFrame()
+    verdicts = sorted(table["verdict"].unique()) if "verdict" in table else []
+    options = "".join(f"<option>{html.escape(v)}</option>" for v in verdicts)
+    rows = table.to_html(index=False, escape=True, table_id="claims") if len(table) else "<p>no claims table</p>"
+    script = ("<script>function filt(v){document.querySelectorAll('#claims tbody tr').forEach(function(r){"
+              "var c=r.cells[" + str(list(table.columns).index("verdict") if "verdict" in table else 0) + "];"
+              "r.style.display=(!v||c.textContent.trim()===v)?'':'none';});}</script>")
+    body = (f"<p>The source papers' claims tested against ddfbench's records (reports/claims.md).</p>"
+            f"<label>verdict <select id='verdict' onchange='filt(this.value)'><option value=''>all</option>{options}"
+            f"</select></label>{rows}{script}")
+    with open(os.path.join(out, "claims.html"), "w") as fh:
+        fh.write(page("Claims", body))
+
+
+def report_folders(reports: str) -> list[str]:
+    """Every folder below reports with a table.csv, relative to reports, sorted."""
+    return sorted(os.path.relpath(f, reports) for f, _, files in os.walk(reports) if "table.csv" in files)
+
+
+def _slug(rel: str) -> str:
+    return "report-" + rel.replace(os.sep, "-")
+
+
+def write_reports(reports: str, out: str) -> list[str]:
+    """One page per report folder: its table.csv and its images (copied under img/). Returns the page names."""
+    names = []
+    for rel in report_folders(reports):
+        folder, slug = os.path.join(reports, rel), _slug(rel)
+        images = []
+        for name in sorted(f for f in os.listdir(folder) if f.endswith(".png")):
+            target = os.path.join("img", f"{slug}-{name}")
+            shutil.copy2(os.path.join(folder, name), os.path.join(out, target))
+            images.append(f"<p><img src='{target}' alt='{html.escape(rel)} {name}'></p>")
+        table = pd.read_csv(os.path.join(folder, "table.csv"))
+        shown = [c for c in table.columns if not c.endswith(("_ci_lo", "_ci_hi", "_std")) and c != "keys"]
+        body = (f"<p>From <code>reports/{html.escape(rel)}</code>.</p>"
+                + table[shown].to_html(index=False, float_format=lambda v: f"{v:.4g}", na_rep="–") + "".join(images))
+        with open(os.path.join(out, f"{slug}.html"), "w") as fh:
+            fh.write(page(rel, body))
+        names.append(slug)
+    return names
+
+
+def write_gallery(reports: str, out: str) -> int:
+    """gallery.html: every report's gallery.png (copied under img/); returns how many."""
+    found = sorted(os.path.relpath(f, reports) for f, _, files in os.walk(reports) if "gallery.png" in files)
+    parts = []
+    for rel in found:
+        target = os.path.join("img", f"{_slug(rel)}-gallery.png")
+        shutil.copy2(os.path.join(reports, rel, "gallery.png"), os.path.join(out, target))
+        parts.append(f"<h2>{html.escape(rel)}</h2><img class='gallery' src='{target}' alt='gallery of {html.escape(rel)}'>")
+    with open(os.path.join(out, "gallery.html"), "w") as fh:
+        fh.write(page("Gallery", "".join(parts) or "<p>no gallery</p>"))
+    return len(found)
+
+
+def write_site(reports: str, out: str) -> dict[str, int]:
+    """Write the whole site into out; returns {"runs": plotted run points, "pages": report pages, "galleries": n}."""
+    import plotly
+
+    os.makedirs(os.path.join(out, "img"), exist_ok=True)
+    shutil.copy2(os.path.join(os.path.dirname(plotly.__file__), "package_data", PLOTLY_JS), os.path.join(out, PLOTLY_JS))
+    df = runs(reports)
+    points = write_pareto(df, out)
+    write_claims(reports, out)
+    galleries = write_gallery(reports, out)
+    pages = write_reports(reports, out)
+    links = "".join(f"<li><a href='{p}.html'>{html.escape(p[len('report-'):])}</a></li>" for p in pages)
+    body = ("<p>ddfbench: which shape representation, at what cost. <a href='pareto.html'>Accuracy against cost</a>, "
+            "<a href='claims.html'>the papers' claims</a>, <a href='gallery.html'>galleries</a>, and every report:</p>"
+            f"<ul>{links}</ul>")
+    with open(os.path.join(out, "index.html"), "w") as fh:
+        fh.write(page("ddfbench results", body))
+    return {"runs": points, "pages": len(pages), "galleries": galleries}
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m ddfbench.report.site", description=__doc__.split("\n")[0])
+    parser.add_argument("--reports", default="reports", help="the committed reports (default: reports)")
+    parser.add_argument("--out", required=True, help="folder to write the site into (open its index.html)")
+    parser.add_argument("--screenshot", help="also save a PNG of the Pareto page there (headless Chromium, Selenium)")
+    args = parser.parse_args(argv)
+    if not os.path.isdir(args.reports):
+        print(f"ddfbench.report.site: --reports {args.reports}: no such folder", file=sys.stderr)
+        return 2
+    got = write_site(args.reports, args.out)
+    print(f"wrote {args.out}/index.html: {got['runs']} run points, {got['pages']} report pages, "
+          f"{got['galleries']} galleries", flush=True)
+    if args.screenshot:
+        screenshot(os.path.join(os.path.abspath(args.out), "pareto.html"), args.screenshot)
+    return 0
+
+
+def screenshot(page_path: str, png: str, width: int = 1300, height: int = 1100) -> None:
+    """Save a PNG of a page as headless Chromium draws it (Debian's chromium and chromium-driver)."""
+    import time
+
+    from selenium import webdriver
+    from selenium.webdriver.chrome.service import Service
+
+    options = webdriver.ChromeOptions()
+    options.binary_location = shutil.which("chromium") or "chromium"
+    for flag in ("--headless=new", "--no-sandbox", "--disable-gpu", f"--window-size={width},{height}"):
+        options.add_argument(flag)
+    driver = webdriver.Chrome(service=Service(shutil.which("chromedriver") or "chromedriver"), options=options)
+    try:
+        driver.get(f"file://{page_path}")
+        time.sleep(1.0)  # plotly draws after load
+        driver.save_screenshot(png)
+    finally:
+        driver.quit()
+
+
+if __name__ == "__main__":
+    sys.exit(main())

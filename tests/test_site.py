@@ -1,0 +1,105 @@
+"""The results site in a real browser (headless Chromium through Selenium): no console errors, one plotted point per
+run and axis, a family's legend entry hides its points, every gallery image loads. CI installs the browser
+(.ci/run); elsewhere the test is skipped when Chromium or its driver is missing, and fails under CI=true."""
+
+import os
+import shutil
+
+import numpy as np
+import pytest
+
+from ddfbench.report import site
+
+WebDriverWait = pytest.importorskip("selenium.webdriver.support.wait").WebDriverWait
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+CHROMIUM, DRIVER = shutil.which("chromium"), shutil.which("chromedriver")
+
+
+@pytest.fixture(scope="module")
+def browser():
+    if not (CHROMIUM and DRIVER):
+        message = "needs Debian's chromium and chromium-driver (apt-get install chromium chromium-driver)"
+        if os.environ.get("CI"):
+            pytest.fail(message)
+        pytest.skip(message)
+    from selenium import webdriver
+    from selenium.webdriver.chrome.service import Service
+
+    options = webdriver.ChromeOptions()
+    options.binary_location = CHROMIUM
+    for flag in ("--headless=new", "--no-sandbox", "--disable-gpu", "--window-size=1400,1000",
+                 "--allow-file-access-from-files"):
+        options.add_argument(flag)
+    options.set_capability("goog:loggingPrefs", {"browser": "ALL"})
+    driver = webdriver.Chrome(service=Service(DRIVER), options=options)
+    yield driver
+    driver.quit()
+
+
+@pytest.fixture(scope="module")
+def built(tmp_path_factory):
+    out = tmp_path_factory.mktemp("site")
+    got = site.write_site(os.path.join(ROOT, "reports"), str(out))
+    return out, got
+
+
+def errors(driver):
+    return [e for e in driver.get_log("browser") if e["level"] == "SEVERE"]
+
+
+# the run points each family's traces draw on each plot, read from the DOM: every drawn trace group carries its
+# calcdata (d3's __data__), whose trace names the family; a hidden trace draws no group
+POINTS = """
+var out = {};
+document.querySelectorAll('.js-plotly-plot').forEach(function (gd) {
+  gd._fullData.forEach(function (t) {
+    if (t.meta && t.meta.kind === 'runs') out[gd.id + '|' + t.meta.family] = 0;
+  });
+  gd.querySelectorAll('.scatterlayer .trace').forEach(function (g) {
+    var t = g.__data__ && g.__data__[0] && g.__data__[0].trace;
+    if (!t || !t.meta || t.meta.kind !== 'runs' || t.visible !== true) return;
+    out[gd.id + '|' + t.meta.family] += g.querySelectorAll('path.point').length;
+  });
+});
+return out;
+"""
+
+
+def test_pareto_page_plots_every_run_and_a_legend_click_hides_a_family(browser, built):
+    out, got = built
+    df = site.runs(os.path.join(ROOT, "reports"))
+    expected = sum(int(((df[x].astype(float) > 0) & (df["chamfer_l2"].astype(float) > 0)
+                        & np.isfinite(df[x].astype(float))).sum()) for x, _ in site.AXES if x in df)
+    assert got["runs"] == expected > 0
+    browser.get(f"file://{out}/pareto.html")
+    counts = browser.execute_script(POINTS)
+    assert sum(counts.values()) == expected, counts
+    assert not errors(browser)
+    first_plot = next(iter(counts)).split("|")[0]
+    families = sorted(k.split("|")[1] for k in counts if k.startswith(first_plot + "|"))
+    hidden = families[0]
+    items = browser.find_elements("css selector", f"#{first_plot} .legend .traces")
+    [item] = [i for i in items if i.text.strip() == hidden]
+    item.find_element("css selector", ".legendtoggle").click()
+    # plotly acts on a legend click after its double-click window (300 ms): wait for the redraw
+    WebDriverWait(browser, 10).until(lambda b: b.execute_script(POINTS)[f"{first_plot}|{hidden}"] == 0)
+    after = browser.execute_script(POINTS)
+    assert after[f"{first_plot}|{hidden}"] == 0 < counts[f"{first_plot}|{hidden}"]
+    assert all(after[k] == counts[k] for k in counts if k.startswith(first_plot) and not k.endswith(f"|{hidden}")), (
+        counts, after)
+    assert not errors(browser)
+
+
+def test_every_gallery_image_loads_and_the_claims_filter_hides_rows(browser, built):
+    out, got = built
+    browser.get(f"file://{out}/gallery.html")
+    loaded = browser.execute_script("return Array.from(document.images).map(i => i.complete && i.naturalWidth > 0)")
+    assert len(loaded) == got["galleries"] > 0 and all(loaded)
+    browser.get(f"file://{out}/claims.html")
+    rows = browser.execute_script("return document.querySelectorAll('#claims tbody tr').length")
+    verdicts = browser.execute_script("return Array.from(document.querySelectorAll('#verdict option')).map(o => o.value)")
+    browser.execute_script("filt(arguments[0])", verdicts[1])
+    shown = browser.execute_script(
+        "return Array.from(document.querySelectorAll('#claims tbody tr')).filter(r => r.style.display !== 'none').length")
+    assert 0 < shown < rows and not errors(browser)
