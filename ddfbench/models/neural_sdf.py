@@ -1,7 +1,10 @@
 """Neural SDF: harmonic embedding -> MLP -> signed distance, answered by sphere tracing.
 
 Network: x (3) -> [x, sin(2^k w0 x), cos(2^k w0 x)] for k < n_harmonics (3 + 6*n_harmonics
-features) -> `depth` Linear+activation layers of `width` -> Linear -> 1. Activation
+features), and with grid_levels L > 0 the features of a learned multiresolution hash grid at x
+(ddfbench.models.feature_grid, the encoding the line-grid DDF reads: L levels of grid_features, grid_base
+to grid_finest cells a side over the field box, 2^grid_log2_size entries a level) -> `depth`
+Linear+activation layers of `width` -> Linear -> 1 (the hash-grid SDF: a grid and a small head). Activation
 softplus (softplus_beta, 100 by default) or relu. Geometric initialization (Atzmon & Lipman
 2020) starts the field near the SDF of a sphere of radius `init_radius` (exactly so only in
 the wide-network limit with relu; at width 128 and in our half-unit box, softplus 100 gives
@@ -31,29 +34,40 @@ from ddfbench.core.errors import InputError
 from ddfbench.core.geometry import BOX_HALF, FourierFeatures
 from ddfbench.core.representation import Budget, FitData, FitStats, Probe
 from ddfbench.fit.train import seed_everything
+from ddfbench.models import feature_grid
 from ddfbench.models._sdf_family import NetSDFFamily
 
-_ARCH_KEYS = ("n_harmonics", "omega0", "width", "depth", "activation", "softplus_beta")
+_ARCH_KEYS = ("n_harmonics", "omega0", "width", "depth", "activation", "softplus_beta", "grid_levels", "grid_features",
+              "grid_base", "grid_finest", "grid_log2_size")
 
 
 class SDFNet(nn.Module):
-    """Harmonic embedding -> depth x (Linear, activation) of width -> Linear -> (M,)."""
+    """[harmonic embedding, hash-grid features] -> depth x (Linear, activation) of width -> Linear -> (M,)."""
 
-    def __init__(self, n_harmonics: int = 6, omega0: float = 1.0, width: int = 128, depth: int = 6,
-                 activation: str = "softplus", softplus_beta: float = 100.0):
+    def __init__(self, n_harmonics: int, omega0: float, width: int, depth: int, activation: str, softplus_beta: float,
+                 grid_levels: int, grid_features: int, grid_base: int, grid_finest: int, grid_log2_size: int,
+                 half: float = BOX_HALF):
         super().__init__()
         if activation not in ("softplus", "relu"):
             raise InputError(f"model.activation '{activation}': unknown (softplus | relu)")
-        if width < 1 or depth < 1 or n_harmonics < 0:
-            raise InputError(f"model width={width} depth={depth} n_harmonics={n_harmonics}: width, depth >= 1, n_harmonics >= 0")
+        if width < 1 or depth < 1 or n_harmonics < 0 or grid_levels < 0:
+            raise InputError(f"model width={width} depth={depth} n_harmonics={n_harmonics} grid_levels={grid_levels}: "
+                             "width, depth >= 1, n_harmonics, grid_levels >= 0")
         self.embed = FourierFeatures(n_harmonics, omega0)
-        dims = [self.embed.out_dim(3)] + [width] * depth
+        self.grid = None
+        if grid_levels:
+            keys = dict(grid_levels=grid_levels, grid_features=grid_features, grid_base=grid_base,
+                        grid_finest=grid_finest, grid_log2_size=grid_log2_size)
+            feature_grid.check_keys(keys, "grid_")
+            self.grid = feature_grid.FeatureGrid(grid_levels, grid_features, grid_base, grid_finest, grid_log2_size, half)
+        n_grid = grid_levels * grid_features if self.grid is not None else 0
+        dims = [self.embed.out_dim(3) + n_grid] + [width] * depth
         self.hidden = nn.ModuleList(nn.Linear(a, b) for a, b in zip(dims[:-1], dims[1:]))
         self.out = nn.Linear(width, 1)
         self.act = nn.Softplus(beta=softplus_beta) if activation == "softplus" else nn.ReLU()
 
     def geometric_init(self, radius: float) -> None:
-        """Start near the SDF of a sphere of `radius` (SAL); embedding sin/cos weights start at zero."""
+        """Start near the SDF of a sphere of `radius` (SAL); the weights on the sin/cos and grid features start at zero."""
         with torch.no_grad():
             for layer in self.hidden:
                 nn.init.normal_(layer.weight, 0.0, math.sqrt(2.0 / layer.out_features))
@@ -64,6 +78,8 @@ class SDFNet(nn.Module):
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         h = self.embed(x)
+        if self.grid is not None:
+            h = torch.cat([h, self.grid.lookup(x).flatten(1)], 1)
         for layer in self.hidden:
             h = self.act(layer(h))
         return self.out(h).squeeze(1)
@@ -99,7 +115,7 @@ class NeuralSDF(NetSDFFamily):
         self.net = self._new_net()
 
     def _new_net(self) -> SDFNet:
-        net = SDFNet(**{k: self.cfg[k] for k in _ARCH_KEYS if k in self.cfg})
+        net = SDFNet(**{k: self.cfg[k] for k in _ARCH_KEYS}, half=self.domain)
         if bool(self.cfg["geometric_init"]):
             net.geometric_init(float(self.cfg["init_radius"]))
         return net.eval()

@@ -11,6 +11,7 @@ from torch import nn
 from ddfbench.core import plugins
 from ddfbench.core.errors import InputError
 from ddfbench.core.geometry import BOX_HALF, FourierFeatures
+from ddfbench.models import feature_grid
 from ddfbench.models.ddf.line_grid import LineGrid
 
 _CHOICES = {"activation": ("relu", "softplus"), "direction": ("vector", "angles"), "param": ("point", "ray"),
@@ -28,14 +29,9 @@ def checked_config(cfg: Mapping[str, Any]) -> dict[str, Any]:
                 "mesh_keep", "mesh_rank", "mesh_coarse"):
         if int(out[key]) < 1:
             raise InputError(f"model.{key} {out[key]}: must be a positive integer")
-    for key in ("line_grid_points", "line_grid_levels", "line_grid_features", "line_grid_base", "line_grid_finest",
-                "line_grid_log2_size"):
-        if int(out[key]) < (0 if key == "line_grid_points" else 1):
-            raise InputError(f"model.{key} {out[key]}: must be a {'non-negative' if key == 'line_grid_points' else 'positive'} integer")
-    if int(out["line_grid_log2_size"]) > 24:
-        raise InputError(f"model.line_grid_log2_size {out['line_grid_log2_size']}: at most 24 (2^24 entries a level)")
-    if int(out["line_grid_finest"]) < int(out["line_grid_base"]):
-        raise InputError(f"model.line_grid_finest {out['line_grid_finest']}: must be >= line_grid_base {out['line_grid_base']}")
+    if int(out["line_grid_points"]) < 0:
+        raise InputError(f"model.line_grid_points {out['line_grid_points']}: must be a non-negative integer")
+    feature_grid.check_keys(out, "line_grid_")
     if not 0.0 <= float(out["entry_share"]) < 1.0:
         raise InputError(f"model.entry_share {out['entry_share']}: must be in [0, 1)")
     for key in ("mesh_band", "mesh_lipschitz"):
