@@ -5,7 +5,7 @@ point between nodes blends them trilinearly, and a neural SDF with the grid save
 import torch
 
 from ddfbench.models import load_family
-from ddfbench.models.feature_grid import FeatureGrid
+from ddfbench.models._feature_grid import FeatureGrid
 
 HALF = 0.6
 

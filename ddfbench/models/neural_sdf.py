@@ -2,7 +2,7 @@
 
 Network: x (3) -> [x, sin(2^k w0 x), cos(2^k w0 x)] for k < n_harmonics (3 + 6*n_harmonics
 features), and with grid_levels L > 0 the features of a learned multiresolution hash grid at x
-(ddfbench.models.feature_grid, the encoding the line-grid DDF reads: L levels of grid_features, grid_base
+(ddfbench.models._feature_grid, the encoding the line-grid DDF reads: L levels of grid_features, grid_base
 to grid_finest cells a side over the field box, 2^grid_log2_size entries a level) -> `depth`
 Linear+activation layers of `width` -> Linear -> 1 (the hash-grid SDF: a grid and a small head). Activation
 softplus (softplus_beta, 100 by default) or relu. Geometric initialization (Atzmon & Lipman
@@ -34,7 +34,7 @@ from ddfbench.core.errors import InputError
 from ddfbench.core.geometry import BOX_HALF, FourierFeatures
 from ddfbench.core.representation import Budget, FitData, FitStats, Probe
 from ddfbench.fit.train import seed_everything
-from ddfbench.models import feature_grid
+from ddfbench.models import _feature_grid as feature_grid
 from ddfbench.models._sdf_family import NetSDFFamily
 
 _ARCH_KEYS = ("n_harmonics", "omega0", "width", "depth", "activation", "softplus_beta", "grid_levels", "grid_features",

@@ -8,7 +8,7 @@ along the line (as a light-field network reads points sampled along its ray, e.g
 2022). The MLP then sees where along the line the grid holds surface-like features and decodes the
 hit from them; the query stays one network evaluation per ray (K*L trilinear lookups and one MLP).
 
-The grid itself (levels, dense and hashed indexing, trilinear lookup) is ddfbench.models.feature_grid's,
+The grid itself (levels, dense and hashed indexing, trilinear lookup) is ddfbench.models._feature_grid's,
 shared with the hash-grid neural SDF.
 """
 
@@ -19,7 +19,7 @@ import math
 import torch
 
 from ddfbench.core.geometry import ray_box
-from ddfbench.models.feature_grid import FeatureGrid
+from ddfbench.models._feature_grid import FeatureGrid
 
 LOOKUP_CHUNK = 65536  # points per lookup call: its int64 corner indices take levels * 8 * 8 bytes a point
 

@@ -11,7 +11,7 @@ from torch import nn
 from ddfbench.core import plugins
 from ddfbench.core.errors import InputError
 from ddfbench.core.geometry import BOX_HALF, FourierFeatures
-from ddfbench.models import feature_grid
+from ddfbench.models import _feature_grid as feature_grid
 from ddfbench.models.ddf.line_grid import LineGrid
 
 _CHOICES = {"activation": ("relu", "softplus"), "direction": ("vector", "angles"), "param": ("point", "ray"),
