@@ -128,7 +128,7 @@ def test_a_family_reaches_no_layer_above_it():
 
 # The stage packages, bottom first: the data flow of one run (docs/architecture.md).
 STAGES = ("core", "truth", "sampling", "evaluate", "fit", "models", "render", "run", "report", "bench")
-ENTRY_POINTS = ("ddfbench", "ddfbench.__main__", "ddfbench.cli")
+ENTRY_POINTS = ("ddfbench", "ddfbench.__main__", "ddfbench.cli", "ddfbench.suite")
 
 
 def stage_of(module: str) -> str | None:

@@ -1,0 +1,235 @@
+"""`python -m ddfbench.suite run NAME --tier TIER [--dry-run] [--results DIR]` and `python -m ddfbench.suite status NAME`.
+
+A suite file (conf/suite/<name>.yaml) names the benchmark: per tier, each experiment with the report folder it
+writes and the overrides its command line adds. `run --dry-run` prints each experiment's jobs per model and its
+estimated CPU-hours, from the committed records' wall time per job (the report's own records.jsonl.gz, else any
+committed record of the same model, else unknown); `run` runs each experiment (Hydra resumes finished jobs and
+prints a progress line per job with an ETA), then writes its report. `status` says, per report, the code commit
+its records come from and whether the code or config of a model it ran changed since (stale), by `git diff`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime as dt
+import os
+import statistics
+import subprocess
+import sys
+from dataclasses import dataclass, field
+from typing import Any
+
+from omegaconf import OmegaConf
+
+from ddfbench.core import plugins
+from ddfbench.core.errors import InputError
+from ddfbench.core.plugins import CONF_DIR
+from ddfbench.report import compact
+
+ROOT = os.path.dirname(CONF_DIR)
+
+
+@dataclass
+class Entry:
+    """One experiment of a tier: its report folder (relative to the repository) and extra overrides."""
+
+    experiment: str
+    report: str
+    overrides: list[str] = field(default_factory=list)
+
+
+def load_suite(name: str) -> dict[str, list[Entry]]:
+    """{tier: entries} of conf/suite/<name>.yaml; a one-line InputError naming the file and key when malformed."""
+    path = os.path.join(CONF_DIR, "suite", f"{name}.yaml")
+    if not os.path.isfile(path):
+        known = sorted(f[:-5] for f in os.listdir(os.path.join(CONF_DIR, "suite")) if f.endswith(".yaml"))
+        raise InputError(f"suite '{name}': no conf/suite/{name}.yaml (suites: {', '.join(known)})")
+    tiers = OmegaConf.to_container(OmegaConf.load(path)).get("tiers")  # type: ignore[union-attr]
+    if not isinstance(tiers, dict) or not tiers:
+        raise InputError(f"conf/suite/{name}.yaml: needs `tiers: {{tier: {{experiment: {{report: ...}}}}}}`")
+    out: dict[str, list[Entry]] = {}
+    for tier, entries in tiers.items():
+        out[tier] = []
+        for experiment, spec in (entries or {}).items():
+            if not os.path.isfile(os.path.join(CONF_DIR, "experiment", f"{experiment}.yaml")):
+                raise InputError(f"conf/suite/{name}.yaml: tiers.{tier}.{experiment}: no conf/experiment/{experiment}.yaml")
+            if not isinstance(spec, dict) or not spec.get("report"):
+                raise InputError(f"conf/suite/{name}.yaml: tiers.{tier}.{experiment}: needs a `report` folder")
+            out[tier].append(Entry(experiment, str(spec["report"]), [str(o) for o in spec.get("overrides") or []]))
+    return out
+
+
+def jobs_per_model(entry: Entry) -> dict[str, int]:
+    """{model: jobs} of the experiment's sweep as Hydra's basic sweeper expands it (no job is composed)."""
+    from hydra import initialize_config_dir
+    from hydra._internal.core_plugins.basic_sweeper import BasicSweeper
+    from hydra.core.global_hydra import GlobalHydra
+    from hydra.core.override_parser.overrides_parser import OverridesParser
+    from hydra.types import RunMode
+
+    GlobalHydra.instance().clear()
+    with initialize_config_dir(CONF_DIR, version_base="1.3", job_name="ddfbench_suite"):
+        loader = GlobalHydra.instance().config_loader()
+        overrides = [f"+experiment={entry.experiment}", *entry.overrides]
+        master = loader.load_configuration("config", overrides, run_mode=RunMode.MULTIRUN)
+        params = [f"{k}={v}" for k, v in (master.hydra.sweeper.get("params") or {}).items()]
+        parsed = OverridesParser.create(config_loader=loader).parse_overrides(params + overrides)
+        default_model = str(master.hydra.runtime.choices.get("model") if "runtime" in master.hydra else master.model)
+        counts: dict[str, int] = {}
+        for batch in BasicSweeper.split_arguments(parsed, None):
+            for job in batch:
+                model = next((o.split("=", 1)[1] for o in job if o.startswith("model=")), default_model)
+                counts[model] = counts.get(model, 0) + 1
+    return counts
+
+
+def _seconds(rec: dict[str, Any]) -> float | None:
+    try:
+        return (dt.datetime.fromisoformat(rec["finished"]) - dt.datetime.fromisoformat(rec["started"])).total_seconds()
+    except (KeyError, TypeError, ValueError):
+        return None
+
+
+def committed_records(reports: str) -> dict[str, list[dict[str, Any]]]:
+    """{report folder relative to the repository: its compact records} for every records.jsonl.gz below reports."""
+    out = {}
+    for folder, _, files in os.walk(reports):
+        if compact.FILE in files:
+            out[os.path.relpath(folder, ROOT)] = compact.read_compact(os.path.join(folder, compact.FILE))
+    return out
+
+
+def job_seconds(entry: Entry, model: str, records: dict[str, list[dict[str, Any]]]) -> tuple[float | None, str]:
+    """Median wall seconds of one job of `model` and where it was measured (the entry's report, else any report)."""
+    own = [s for r in records.get(entry.report, []) if r.get("model") == model and (s := _seconds(r)) is not None]
+    if own:
+        return statistics.median(own), entry.report
+    other = [(s, folder) for folder, recs in records.items() for r in recs
+             if r.get("model") == model and (s := _seconds(r)) is not None]
+    if other:
+        return statistics.median(s for s, _ in other), "other reports"
+    return None, "no record"
+
+
+def plan(suite: str, tier: str, reports: str = os.path.join(ROOT, "reports")) -> list[dict[str, Any]]:
+    """Per experiment of the tier: jobs, estimated CPU-hours (None when a model has no measured record), sources."""
+    tiers = load_suite(suite)
+    if tier not in tiers:
+        raise InputError(f"suite {suite}: no tier '{tier}' (tiers: {', '.join(tiers)})")
+    records = committed_records(reports)
+    rows = []
+    for entry in tiers[tier]:
+        counts = jobs_per_model(entry)
+        hours, unknown, sources = 0.0, [], set()
+        for model, n in counts.items():
+            seconds, source = job_seconds(entry, model, records)
+            if seconds is None:
+                unknown.append(model)
+            else:
+                hours += n * seconds / 3600
+                sources.add(source)
+        rows.append({"experiment": entry.experiment, "report": entry.report, "jobs": sum(counts.values()),
+                     "models": len(counts), "cpu_hours": hours, "unknown": unknown, "sources": sorted(sources),
+                     "overrides": entry.overrides})
+    return rows
+
+
+def print_plan(rows: list[dict[str, Any]]) -> None:
+    for r in rows:
+        unknown = f" + {len(r['unknown'])} model(s) never measured ({', '.join(r['unknown'])})" if r["unknown"] else ""
+        print(f"{r['experiment']:<16} {r['jobs']:>5} jobs  {r['cpu_hours']:6.2f} CPU-h{unknown}  -> {r['report']}"
+              f"  (cost from {', '.join(r['sources']) or 'nothing'})")
+    total = sum(r["cpu_hours"] for r in rows)
+    print(f"{'total':<16} {sum(r['jobs'] for r in rows):>5} jobs  {total:6.2f} CPU-h (wall per job as recorded, "
+          "one job at a time; more with unmeasured models)")
+
+
+def run(suite: str, tier: str, results: str) -> int:
+    """Run every experiment of the tier into results/ (resuming), then write its report; the worst exit code."""
+    rc = 0
+    for entry in load_suite(suite)[tier]:
+        cmd = [sys.executable, "-m", "ddfbench", f"+experiment={entry.experiment}", f"out_dir={results}", "quiet=true",
+               *entry.overrides]
+        print("$", " ".join(cmd[1:]), flush=True)
+        rc = max(rc, subprocess.run(cmd).returncode)
+        records_dir = os.path.join(results, str(OmegaConf.load(os.path.join(
+            CONF_DIR, "experiment", f"{entry.experiment}.yaml")).get("experiment_name") or entry.experiment))
+        rc = max(rc, subprocess.run([sys.executable, "-m", "ddfbench.report", records_dir, "--out",
+                                     os.path.join(ROOT, entry.report)]).returncode)
+    return rc
+
+
+def stale(entry: Entry, records: list[dict[str, Any]]) -> tuple[str, list[str]]:
+    """(the records' code commit(s), files of the models' families and configs changed since the oldest one)."""
+    shas = sorted({str((r.get("env") or {}).get("code_sha")) for r in records if (r.get("env") or {}).get("code_sha")})
+    if not shas:
+        return "no records", []
+    paths = {"ddfbench/core", "ddfbench/truth", "ddfbench/sampling", "ddfbench/evaluate", "ddfbench/fit",
+             f"conf/experiment/{entry.experiment}.yaml"}
+    for rec in records:
+        family, model = str(rec.get("family")), str(rec.get("model"))
+        paths |= {f"ddfbench/models/{family}", f"ddfbench/models/{family}.py", f"conf/model/{model}.yaml",
+                  f"conf/model/{family}.yaml"}
+    existing = sorted(p for p in paths if os.path.exists(os.path.join(ROOT, p)))
+    changed = []
+    for sha in shas:
+        done = subprocess.run(["git", "-C", ROOT, "diff", "--name-only", sha, "HEAD", "--", *existing],
+                              capture_output=True, text=True)
+        if done.returncode != 0:
+            return ", ".join(s[:7] for s in shas), [f"commit {sha[:7]} is not in this clone"]
+        changed += [path for path in done.stdout.split() if not _only_membership_changed(sha, path)]
+    return ", ".join(s[:7] for s in shas), sorted(set(changed))
+
+
+def _only_membership_changed(sha: str, path: str) -> bool:
+    """Whether a plugin YAML changed only in its `experiments` part (which experiments it joins, its levels there):
+    the config a finished run used is the same."""
+    if not (path.startswith("conf/") and path.endswith(".yaml")):
+        return False
+    old = subprocess.run(["git", "-C", ROOT, "show", f"{sha}:{path}"], capture_output=True, text=True)
+    if old.returncode != 0 or not os.path.isfile(os.path.join(ROOT, path)):
+        return False
+    before, after = OmegaConf.create(old.stdout), OmegaConf.load(os.path.join(ROOT, path))
+    for cfg in (before, after):
+        cfg.pop(plugins.META_KEY, None)
+    return before == after
+
+
+def status(suite: str) -> int:
+    """Print each report of the suite with its records' commit and whether it is stale; 1 when any is."""
+    records = committed_records(os.path.join(ROOT, "reports"))
+    worst = 0
+    for tier, entries in load_suite(suite).items():
+        for entry in entries:
+            recs = records.get(entry.report, [])
+            commits, changed = stale(entry, recs) if recs else ("", [])
+            state = "stale" if changed else ("unknown" if not recs else "current")
+            worst = max(worst, 1 if state != "current" else 0)
+            print(f"{tier:<5} {entry.experiment:<16} {entry.report:<28} {state:<8} "
+                  + (f"records of {commits}" if recs else "no records committed")
+                  + (f"; changed since: {', '.join(changed[:4])}{' ...' if len(changed) > 4 else ''}" if changed else ""))
+    return worst
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m ddfbench.suite", description=__doc__.split("\n")[0])
+    sub = parser.add_subparsers(dest="command", required=True)
+    run_p = sub.add_parser("run", help="run a tier (or print its plan with --dry-run)")
+    run_p.add_argument("suite")
+    run_p.add_argument("--tier", required=True)
+    run_p.add_argument("--dry-run", action="store_true")
+    run_p.add_argument("--results", default="results", help="out_dir of the runs (default: results)")
+    status_p = sub.add_parser("status", help="which reports are stale")
+    status_p.add_argument("suite")
+    args = parser.parse_args(argv)
+    try:
+        if args.command == "status":
+            return status(args.suite)
+        if args.dry_run:
+            print_plan(plan(args.suite, args.tier))
+            return 0
+        return run(args.suite, args.tier, args.results)
+    except InputError as exc:
+        print(f"ddfbench.suite: {exc}", file=sys.stderr)
+        return 2
+

@@ -1,0 +1,54 @@
+"""The suite file names the benchmark: a tier's plan expands each experiment's own grid, a malformed file or an
+unknown tier is one line, and `status` tells a report whose code or config changed since its records."""
+
+import os
+import subprocess
+
+import pytest
+
+from ddfbench.core import plugins
+from ddfbench.core.errors import InputError
+from ddfbench.report import suite
+
+ROOT = suite.ROOT
+
+
+def test_the_core_plan_expands_each_experiment_as_its_sweep_does():
+    rows = {r["experiment"]: r for r in suite.plan("v1", "core")}
+    assert rows["default"]["jobs"] == len(plugins.members("model", "default")) * 3  # seed=0,1,2 in the suite file
+    assert rows["shape_suite"]["jobs"] == len(plugins.members("model", "shape_suite")) * 12 * 3
+    assert rows["tune_finalists"]["jobs"] == len(plugins.members("model", "tune_finalists")) * 3 * 4 * 3
+    assert rows["default"]["cpu_hours"] > 0 and rows["default"]["sources"] == ["reports/default"]
+
+
+def test_a_bad_suite_or_tier_is_one_line_naming_it(tmp_path, monkeypatch):
+    with pytest.raises(InputError, match=r"suite v1: no tier 'fast' \(tiers: core, long, gpu\)"):
+        suite.plan("v1", "fast")
+    (tmp_path / "suite").mkdir()
+    (tmp_path / "experiment").mkdir()
+    (tmp_path / "suite" / "bad.yaml").write_text("tiers:\n  core:\n    nonesuch: {report: reports/x}\n")
+    monkeypatch.setattr(suite, "CONF_DIR", str(tmp_path))
+    with pytest.raises(InputError, match=r"conf/suite/bad.yaml: tiers.core.nonesuch: no conf/experiment/nonesuch.yaml"):
+        suite.load_suite("bad")
+    with pytest.raises(InputError, match=r"suite 'v2': no conf/suite/v2.yaml \(suites: bad\)"):
+        suite.load_suite("v2")
+
+
+def sha(rev):
+    return subprocess.run(["git", "-C", ROOT, "rev-parse", rev], capture_output=True, text=True, check=True).stdout.strip()
+
+
+def record(commit, family, model):
+    return {"env": {"code_sha": commit}, "family": family, "model": model}
+
+
+def test_status_is_current_at_head_and_names_what_changed_but_not_a_membership_change():
+    entry = suite.Entry("shape_suite", "reports/shape_suite")
+    assert suite.stale(entry, [record(sha("HEAD"), "grid_sdf", "grid_sdf")])[1] == []
+    # c65d9ad added the CAD shapes to the catalog and made grid_sdf join shape_suite (its YAML's experiments part)
+    before = sha("c65d9ad~1")
+    _, changed = suite.stale(entry, [record(before, "grid_sdf", "grid_sdf")])
+    assert "ddfbench/truth/catalog.py" in changed and "conf/model/grid_sdf.yaml" not in changed
+    assert suite._only_membership_changed(before, "conf/model/grid_sdf.yaml")
+    assert not suite._only_membership_changed(before, "conf/model/neural_sdf.yaml")  # gained its grid keys since
+    assert os.path.isfile(os.path.join(ROOT, "conf", "suite", "v1.yaml"))
