@@ -97,3 +97,19 @@ def test_no_committed_report_names_a_folder_of_the_machine_that_ran_it():
                 found += [f"{os.path.relpath(os.path.join(folder, name), ROOT)}: {marker}"
                           for marker in ("/work/", "/tmp/", "/home/", "/root/") if marker in text]
     assert not found, found[:10]
+
+
+def test_the_verdict_block_is_what_the_committed_records_give_and_a_hand_edit_fails(tmp_path):
+    from ddfbench.report import verdict
+
+    assert verdict.main(["--reports", os.path.join(ROOT, "reports"), "--readme", os.path.join(ROOT, "README.md"),
+                         "--check"]) == 0
+    shutil.copytree(os.path.join(ROOT, "reports", "default"), tmp_path / "reports" / "default")
+    shutil.copy(os.path.join(ROOT, "reports", "verdict.md"), tmp_path / "reports" / "verdict.md")
+    readme = tmp_path / "README.md"
+    readme.write_text(open(os.path.join(ROOT, "README.md")).read())
+    assert verdict.main(["--reports", str(tmp_path / "reports"), "--readme", str(readme)]) == 0  # without the suite
+    table = (tmp_path / "reports" / "verdict.md").read_text()
+    assert "`reports/shape_suite`: no records committed" in table and "| ddf_tuned | short: 3,000 steps |" in table
+    (tmp_path / "reports" / "verdict.md").write_text(table.replace("| ddf_tuned | short", "| ddf_tuned | shorter"))
+    assert verdict.main(["--reports", str(tmp_path / "reports"), "--readme", str(readme), "--check"]) == 1

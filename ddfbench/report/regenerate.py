@@ -2,7 +2,7 @@
 `python -m ddfbench.report.regenerate --from-records [--reports DIR] [--check]`
 
 --from-records rebuilds every report below --reports that holds its compact records (records.jsonl.gz) from
-those alone, running no fit, with the options it was written with (report_options.json); --check writes into a
+those alone (and the verdict table, reports/verdict.md and the README's block, ddfbench.report.verdict), running no fit, with the options it was written with (report_options.json); --check writes into a
 scratch folder instead and exits 1 naming each committed file that differs, byte for byte, from its rebuild
 (text files: .md, .csv, .tex; the images are drawn from the same rows and are not compared; sweep_status.md is
 the state of the machine that ran the sweep). CI runs --check.
@@ -36,7 +36,7 @@ import time
 
 from ddfbench.core import plugins
 from ddfbench.fit import tune
-from ddfbench.report import compact, matched, shape_suite
+from ddfbench.report import compact, matched, shape_suite, verdict
 from ddfbench.report import tune as tune_report
 from ddfbench.report.__main__ import OPTIONS_FILE, STATUS_FILE, MixedCommits, write_report
 from ddfbench.report.claims import write_claims
@@ -115,8 +115,9 @@ def differences(committed: str, rebuilt: str) -> list[str]:
                                                            shallow=False)))
 
 
-def from_records(reports: str, check: bool) -> int:
-    """--from-records: rebuild (or, with check, compare) every report below reports that has its records."""
+def from_records(reports: str, check: bool, readme: str | None = None) -> int:
+    """--from-records: rebuild (or, with check, compare) every report below reports that has its records, and the
+    verdict table (reports/verdict.md and the block of `readme`, when it has the markers)."""
     folders = reports_with_records(reports)
     if not folders:
         print(f"ddfbench.report.regenerate: no {compact.FILE} below {reports}", file=sys.stderr)
@@ -137,7 +138,10 @@ def from_records(reports: str, check: bool) -> int:
         print(f"ddfbench.report.regenerate: {path} differs from its rebuild from {compact.FILE}", file=sys.stderr)
     if check:
         print(f"checked {len(folders)} report(s) with records: {len(differing)} file(s) differ", flush=True)
-    return 1 if differing else 0
+    code = 1 if differing else 0
+    if readme and os.path.isfile(readme) and verdict.START in open(readme).read():  # the README's generated block
+        code = max(code, verdict.main(["--reports", reports, "--readme", readme, *(["--check"] if check else [])]))
+    return code
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -153,13 +157,16 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--report-only", action="store_true", help="write the reports from existing records only")
     parser.add_argument("--from-records", action="store_true",
                         help=f"rebuild every report below --reports from its {compact.FILE}, running nothing")
+    parser.add_argument("--readme", help="README whose verdict block --from-records rebuilds (default: the README.md "
+                                         "beside the --reports folder)")
     parser.add_argument("--check", action="store_true",
                         help="with --from-records: compare the rebuilds with the committed files, exit 1 on a difference")
     args = parser.parse_args(argv)
     if args.check and not args.from_records:
         parser.error("--check goes with --from-records")
     if args.from_records:
-        return from_records(args.reports, args.check)
+        readme = args.readme or os.path.join(os.path.dirname(os.path.abspath(args.reports)), "README.md")
+        return from_records(args.reports, args.check, readme)
     experiments = args.only.split(",") if args.only else list(EXPERIMENTS)
     conf = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "conf", "experiment")
     unknown = [e for e in experiments if not os.path.isfile(os.path.join(conf, f"{e}.yaml"))]

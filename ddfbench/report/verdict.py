@@ -1,0 +1,153 @@
+"""`python -m ddfbench.report.verdict [--reports reports] [--readme README.md] [--check]`: the verdict table, generated
+from committed records only, into reports/verdict.md and between the README's verdict markers.
+
+One row per preset and budget: the short budget is `reports/default` (each family's `first_look` level, about a
+minute on 2 cores, with renders), the preset's own budget is `reports/shape_suite` (its fit_steps) on the bunny,
+beside its geometric mean over the suite's evaluation shapes. Per row: CD-L2 as a multiple of the noise floor (the
+mesh against a resample of itself at the same point count) with the 95 % t interval over seeds, the point-to-surface
+chamfer, F@0.005, depth MAE and mask IoU where the run rendered, fit or build seconds, warm frame seconds, bytes. A
+preset with a run that gave no mesh or one off the shape says "not converged" and is not ranked. The footnote names
+the device, threads, point counts and code commits of the records. --check exits 1 when reports/verdict.md or the
+README block differs from what the records give.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import sys
+from typing import Any, Callable
+
+from ddfbench.evaluate.metric_registry import by_name
+from ddfbench.report import compact
+from ddfbench.report.across_shapes import geometric
+from ddfbench.report.records import Record, no_result, ok_records, shape_name
+from ddfbench.report.shape_suite import cells
+from ddfbench.report.stats import summarize_values
+
+START, END = "<!-- verdict:start (python -m ddfbench.report.verdict) -->", "<!-- verdict:end -->"
+SHORT, FULL = "default", "shape_suite"
+SHAPE = "bunny"
+HEADER = ["preset", "budget", "CD-L2 / floor [95 %]", "p2s CD-L2 ×10³", "F@0.005", "depth MAE ×10³ / mask IoU",
+          "fit or build s", "warm frame s", "bytes", "over the suite's shapes: CD-L2 ×10³ [95 %]"]
+
+
+def _floor(rec: Record) -> float:
+    return float(((rec.get("metrics") or {}).get("noise_floor") or {}).get("chamfer_l2") or math.nan)
+
+
+def _mean(recs: list[Record], metric: str, scale: float = 1.0, fmt: str = ".3g") -> str:
+    s = summarize_values(by_name()[metric].read(r) for r in recs)
+    return "–" if not math.isfinite(s.mean) else format(s.mean * scale, fmt)
+
+
+def _ratio_to_floor(recs: list[Record]) -> str:
+    s = summarize_values(by_name()["chamfer_l2"].read(r) / _floor(r) for r in recs)
+    if not math.isfinite(s.mean):
+        return "–"
+    return f"{s.mean:.3g}" + (f" [{s.lo:.3g}, {s.hi:.3g}]" if math.isfinite(s.lo) else "") + f" (n {s.n})"
+
+
+def _steps(recs: list[Record]) -> str:
+    steps = sorted({int((r.get("fit") or {}).get("steps") or 0) for r in recs})
+    return f"{steps[0]:,} steps" if len(steps) == 1 and steps[0] > 1 else "built"
+
+
+def rows(short: list[Record], full: list[Record]) -> list[list[str]]:
+    """The table's rows: per model of either record set, its short-budget row then its own-budget row."""
+    over_shapes = cells(full, "chamfer_l2")
+    models = list(dict.fromkeys(str(r.get("model")) for r in ok_records(short + full)))
+    out = []
+    for model in models:
+        for recs, label in ((short, "short"), (full, "own")):
+            mine = [r for r in ok_records(recs) if r.get("model") == model and shape_name(r) == SHAPE]
+            if not mine:
+                continue
+            budget = f"{label}: {_steps(mine)}"
+            failed = sum(no_result(r) for r in mine)
+            if failed:
+                steps = sorted({(r.get("fit") or {}).get("steps") for r in mine})
+                out.append([model, budget, f"not converged ({failed} of {len(mine)} runs, steps {steps})"]
+                           + ["–"] * (len(HEADER) - 3))
+                continue
+            suite = "–"
+            if label == "own" and model in over_shapes:
+                g = geometric(over_shapes[model])
+                suite = f"{1e3 * g.center:.3g} [{1e3 * g.lo:.3g}, {1e3 * g.hi:.3g}] (n {g.n})" if math.isfinite(g.lo) else "–"
+            image = (f"{_mean(mine, 'depth_mae', 1e3)} / {_mean(mine, 'mask_iou', 1.0, '.3f')}"
+                     if _mean(mine, "mask_iou") != "–" else "–")
+            out.append([model, budget, _ratio_to_floor(mine), _mean(mine, "p2s_chamfer_l2", 1e3),
+                        _mean(mine, "fscore@0.005", 1.0, ".3f"), image, _mean(mine, "fit_s"),
+                        _mean(mine, "render_warm_s"), _mean(mine, "storage_bytes", 1.0, ".3g"), suite])
+    return out
+
+
+def _values(recs: list[Record], field: Callable[[Record], Any]) -> str:
+    """The distinct values of one field over the records, sorted and joined."""
+    return ", ".join(sorted({str(field(r)) for r in recs}))
+
+
+def footnote(sets: dict[str, list[Record]]) -> str:
+    parts = []
+    for name, recs in sets.items():
+        if not recs:
+            parts.append(f"`reports/{name}`: no records committed")
+            continue
+        parts.append(f"`reports/{name}` ({len(recs)} records): device {_values(recs, lambda r: r['env'].get('cpu'))}; "
+                     f"threads {_values(recs, lambda r: r['env'].get('threads'))}; "
+                     f"{_values(recs, lambda r: r['config']['eval'].get('n_points'))} points a surface; "
+                     f"code {_values(recs, lambda r: str(r['env'].get('code_sha'))[:7])}")
+    return ("Generated by `python -m ddfbench.report.verdict` from committed records only (the bunny; mean over seeds; "
+            "short: each family's `first_look` level of the default run; own: the preset's fit_steps in the shape "
+            "suite, whose last column is the geometric mean over its evaluation shapes, per-axis in "
+            "`reports/shape_suite/report.md`). " + "; ".join(parts) + ".")
+
+
+def table(reports: str) -> str:
+    sets = {}
+    for name in (SHORT, FULL):
+        path = os.path.join(reports, name, compact.FILE)
+        sets[name] = compact.read_compact(path) if os.path.isfile(path) else []
+    lines = ["| " + " | ".join(HEADER) + " |", "|" + "---|" * len(HEADER)]
+    lines += ["| " + " | ".join(r) + " |" for r in rows(sets[SHORT], sets[FULL])]
+    return "\n".join(lines) + "\n\n" + footnote(sets) + "\n"
+
+
+def with_block(readme: str, block: str) -> str:
+    """The README text with the block between the markers replaced (InputError-free: missing markers raise)."""
+    if START not in readme or END not in readme:
+        raise ValueError(f"the README has no verdict markers ({START} ... {END})")
+    head, rest = readme.split(START, 1)
+    _, tail = rest.split(END, 1)
+    return f"{head}{START}\n{block}{END}{tail}"
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m ddfbench.report.verdict", description=__doc__.split("\n")[0])
+    parser.add_argument("--reports", default="reports")
+    parser.add_argument("--readme", default="README.md")
+    parser.add_argument("--check", action="store_true", help="exit 1 when a committed file differs from the records")
+    args = parser.parse_args(argv)
+    block = table(args.reports)
+    verdict_path = os.path.join(args.reports, "verdict.md")
+    text = "# Verdict\n\n" + block
+    with open(args.readme) as fh:
+        readme = fh.read()
+    new_readme = with_block(readme, block)
+    if args.check:
+        differ = [p for p, want in ((verdict_path, text), (args.readme, new_readme))
+                  if not os.path.isfile(p) or open(p).read() != want]
+        for path in differ:
+            print(f"ddfbench.report.verdict: {path} differs from the table its records give", file=sys.stderr)
+        return 1 if differ else 0
+    with open(verdict_path, "w") as fh:
+        fh.write(text)
+    with open(args.readme, "w") as fh:
+        fh.write(new_readme)
+    print(f"wrote {verdict_path} and the verdict block of {args.readme}", flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
