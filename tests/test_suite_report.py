@@ -94,3 +94,23 @@ def test_the_winner_is_the_lowest_eligible_candidate_and_is_set_against_the_runn
     assert verdict["by_shape"].center == pytest.approx(1.1 / 2.1) and verdict["by_shape"].n == 3
     assert verdict["by_run"].n == 9 and verdict["by_run"].hi < 1
     assert "| m | a | b |" in finalists.sections(records)[0]
+
+
+def test_the_ddf_sdf_claim_over_shapes_is_refuted_far_from_one_and_confirmed_near_it():
+    from ddfbench.report import claims
+
+    def records(factor):
+        out = []
+        for i, shape in enumerate(SHAPES):
+            for seed in (0, 1):
+                base = 1e-4 * (i + 1)
+                out.append(rec("neural_sdf_tuned", shape, seed, base))
+                out.append(rec("ddf_tuned", shape, seed, base * factor * (1.0 + 0.1 * (i % 3))))
+        return {"shape_suite": out}
+
+    (far,) = claims.accurate_as_sdf_over_shapes(records(20.0))
+    assert far.verdict == claims.REFUTED and "n=6 shapes" in far.measured
+    (near,) = claims.accurate_as_sdf_over_shapes(records(1.0))
+    assert near.verdict == claims.CONFIRMED
+    (none,) = claims.accurate_as_sdf_over_shapes({"shape_suite": []})
+    assert none.verdict == claims.NO_RECORDS

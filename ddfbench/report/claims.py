@@ -31,14 +31,15 @@ from typing import Any, Callable
 
 from ddfbench.core.errors import InputError
 from ddfbench.evaluate.metric_registry import by_name
-from ddfbench.report import matched, paired
+from ddfbench.report import matched, paired, shape_suite
 from ddfbench.report.records import SURFACE_FACTORS, chamfer_l2, empty_mesh, no_result, ok_records, shape_name
 from ddfbench.report.stats import INTERVAL_NAME, Summary, sig3, summarize_values
 from ddfbench.run.runs import code_commits, find_records
 
 CONFIRMED, REFUTED, NOT_SEPARABLE, NOT_TESTABLE, NO_RECORDS, NOT_CONVERGED = (
     "confirmed", "refuted", "not separable at n", "not testable here", "no records", "not converged")
-EXPERIMENTS = ("ablation", "sampling", "representations", "paper_ddf", "render_time", "render_matched", "storage")
+EXPERIMENTS = ("ablation", "sampling", "representations", "paper_ddf", "render_time", "render_matched", "storage",
+               "shape_suite")
 DDF, SDF = matched.REFERENCE, "neural_sdf_tuned"  # the DDF and neural SDF presets representations and render_time run
 EQUIVALENCE = 1.5  # "as accurate as": the DDF/SDF chamfer ratio's interval within [1/1.5, 1.5]
 STORAGE_TOLERANCE = 0.10  # a stored size "matches" within 10 %
@@ -188,6 +189,36 @@ def accurate_as_sdf(records: Records) -> list[Claim]:
                   "(conf/model fit_steps), fit time and parameters shown.")]
 
 
+def accurate_as_sdf_over_shapes(records: Records) -> list[Claim]:
+    """The conclusion's DDF/SDF claim over the shape suite's evaluation shapes, with n = shapes, and the suite's other
+    family ratios beside it as one family of comparisons (Holm-corrected p)."""
+    src, recs = "DDF §VII Conclusion", records.get("shape_suite") or []
+    paper = "with similar training cost (time and parameters) DDFs are as accurate as SDFs"
+    name = "DDF as accurate as the neural SDF, over shapes"
+    rows = {(r["a"], r["b"]): r for r in shape_suite.pair_rows(recs)} if ok_records(recs) else {}
+    row = rows.get((DDF, SDF))
+    if row is None or row["ratio"].n == 0:
+        return [_missing(name, src, paper, "shape_suite")]
+    ratio, bound = row["ratio"], EQUIVALENCE
+    if ratio.n < 2 or not math.isfinite(ratio.lo):
+        verdict = NOT_SEPARABLE
+    elif 1 / bound <= ratio.lo and ratio.hi <= bound:
+        verdict = CONFIRMED
+    else:
+        verdict = REFUTED if ratio.lo > bound and row["p_holm"] < 0.05 else NOT_SEPARABLE
+    others = "; ".join(f"{a}/{b} {r['ratio'].center:.3g}× [{r['ratio'].lo:.3g}, {r['ratio'].hi:.3g}] "
+                       f"(n={r['ratio'].n}, Holm p {r['p_holm']:.2g})"
+                       for (a, b), r in rows.items() if (a, b) != (DDF, SDF) and math.isfinite(r["ratio"].lo))
+    measured = (f"CD ratio {DDF}/{SDF} {ratio.center:.3g}× [{ratio.lo:.3g}, {ratio.hi:.3g}] (n={ratio.n} shapes, "
+                f"Holm p {row['p_holm']:.2g}); beside it: {others}")
+    return [Claim(name, src, paper, measured,
+                  f"`shape_suite`: per-shape means over 3 seeds, then over the evaluation shapes both converged on",
+                  verdict, f"Inference over shapes (ddfbench/report/across_shapes.py): geometric mean of per-shape "
+                  f"ratios, t interval of the mean log ratio; p values Holm-corrected across the suite's family "
+                  f"ratios (one family of claims). 'As accurate' = the interval within [1/{EQUIVALENCE}, "
+                  f"{EQUIVALENCE}]; refuted when it lies above {EQUIVALENCE} and the Holm p < 0.05.")]
+
+
 def renders_faster(records: Records) -> list[Claim]:
     """Fig. 5 / conclusion: DDFs render faster than SDFs and triangle meshes."""
     src, recs = "DDF Fig. 5, §VII", records.get("render_time") or []
@@ -269,7 +300,8 @@ def thesis_2d(records: Records) -> list[Claim]:
 
 
 CLAIMS: tuple[Callable[[Records], list[Claim]], ...] = (
-    table2_ordering, fig6_ordering, table1_bunny, accurate_as_sdf, renders_faster, thesis_storage, thesis_2d)
+    table2_ordering, fig6_ordering, table1_bunny, accurate_as_sdf, accurate_as_sdf_over_shapes, renders_faster,
+    thesis_storage, thesis_2d)
 
 
 def evaluate(records: Records) -> list[Claim]:
