@@ -3,9 +3,10 @@
 The split is fixed and disjoint: `tuning` shapes are the only ones a tuning study may see, `evaluation`
 shapes the only ones the suite's reports rank on. The split spreads each difficulty axis (measured by
 ddfbench.truth.difficulty) over both sides: tuning holds an organic scan (cow), a smooth genus-1 solid
-(torus), a sharp-edged genus-5 part (gear) and an open scan (bunny10k).
+(torus), a sharp-edged genus-5 part (gear) and an open surface (open_box). No tuning shape is a version of an
+evaluation shape (bunny10k, a coarser bunny, is in neither split).
 
-    python -m ddfbench.report.shape_suite --out reports/shape_suite     the table of shapes and measured tags
+    python -m ddfbench.report results/shape_suite --out reports/shape_suite     shapes and tags, families, axes
 """
 
 from __future__ import annotations
@@ -31,7 +32,7 @@ SUITE_V1 = (
     SuiteShape("cow", "tuning", "scan", "pymeshlab sample cow.obj", PYMESHLAB),
     SuiteShape("torus", "tuning", "primitive", "trimesh.creation.torus (R 0.35, r 0.15)", BUILT),
     SuiteShape("gear", "tuning", "cad", "manifold3d CSG (ddfbench/truth/cad.py)", BUILT),
-    SuiteShape("bunny10k", "tuning", "scan, open", "pymeshlab sample bunny10k_textured.obj", PYMESHLAB),
+    SuiteShape("open_box", "tuning", "cad, open", "the unit box without its top face (ddfbench/truth/catalog.py)", BUILT),
     SuiteShape("bunny", "evaluation", "scan",
                "pymeshlab sample bunny.obj (the Stanford bunny, Stanford 3D Scanning Repository)", PYMESHLAB),
     SuiteShape("airplane", "evaluation", "model", "pymeshlab sample airplane.obj", PYMESHLAB),
