@@ -26,7 +26,24 @@ def test_geometric_mean_and_its_log_t_interval():
 def test_ratio_is_the_geometric_mean_of_per_shape_ratios_over_shared_shapes():
     got = ax.ratio({"s1": 2.0, "s2": 8.0, "only_a": 1.0}, {"s1": 1.0, "s2": 2.0})
     assert got.center == pytest.approx(math.sqrt(8.0)) and got.n == 2
-    assert 0 < got.lo < got.center < got.hi and 0 < got.p <= 1
+    # ln ratios ln 2 and ln 4: mean ln sqrt 8, std ln2 / sqrt 2, so t = mean / (std / sqrt 2) = 3 on 1 dof
+    half = 12.7062047 * (math.log(2) / math.sqrt(2)) / math.sqrt(2)
+    assert got.lo == pytest.approx(math.sqrt(8.0) * math.exp(-half), rel=1e-6)
+    assert got.hi == pytest.approx(math.sqrt(8.0) * math.exp(half), rel=1e-6)
+    assert got.p == pytest.approx(0.2048, abs=1e-4)  # 2 (1 - F_t1(3)) = 1 - 2 atan(3) / pi
+
+
+def test_the_same_ratio_on_every_shape_is_certain_not_unknown():
+    got = ax.ratio({"a": 2.0, "b": 4.0, "c": 6.0}, {"a": 1.0, "b": 2.0, "c": 3.0})
+    assert (got.center, got.lo, got.hi, got.p) == (pytest.approx(2.0), pytest.approx(2.0), pytest.approx(2.0), 0.0)
+
+
+def test_a_bounded_metric_gets_the_logit_t_interval():
+    got = ax.bounded({"a": 0.2, "b": 0.8})
+    # logits -ln 4 and ln 4: mean 0, std ln4 sqrt 2, half 12.706 ln4
+    assert got.center == pytest.approx(0.5)
+    assert got.lo == pytest.approx(1 / (1 + math.exp(12.7062047 * math.log(4))), rel=1e-6)
+    assert got.hi == pytest.approx(1 - got.lo, rel=1e-9)
 
 
 def test_holm_steps_down_and_keeps_the_order():

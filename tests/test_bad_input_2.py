@@ -17,7 +17,7 @@ from ddfbench import cli
 from ddfbench.core.errors import InputError
 from ddfbench.fit.budget import fit_limit
 from ddfbench.run import runner, runs
-from ddfbench.run.runs import RECORD_FILE, config_key, find_records, is_done
+from ddfbench.run.runs import config_key, find_records, is_done
 from ddfbench.truth.oracle import Oracle
 from ddfbench.truth.shapes import normalize, validate
 from tests.hard_cases.conftest import compose

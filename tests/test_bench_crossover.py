@@ -4,7 +4,6 @@ import math
 
 import numpy as np
 import pytest
-import trimesh
 
 from ddfbench.bench.context import Context
 from ddfbench.bench.crossover import crossover, depth_error, mesh_with_faces, run

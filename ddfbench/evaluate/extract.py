@@ -39,7 +39,7 @@ import trimesh
 from skimage import measure
 
 from ddfbench.core.errors import InputError
-from ddfbench.core.geometry import grid_axis, grid_points
+from ddfbench.core.geometry import grid_axis
 
 Field = Callable[[np.ndarray], "np.ndarray | torch.Tensor"]
 

@@ -5,11 +5,13 @@ gets n = the number of shapes. Every interval here stays inside its metric's ran
 
     positive, unbounded (chamfer, seconds, bytes)   geometric mean over shapes, t interval of the mean log,
                                                      exponentiated: bounds > 0
-    bounded in [0, 1] (F-score, normal consistency) mean over shapes, bootstrap percentile interval of the
-                                                     mean (seeded): bounds inside [min, max] of the shape means
+    bounded in [0, 1] (F-score, normal consistency) the same on the logit scale: the back-transformed mean logit
+                                                     and t interval (values clipped to [1e-6, 1 - 1e-6]): bounds
+                                                     inside (0, 1), as wide at small n as the chamfer's
     a ratio a / b of two settings                    per shape ln(mean a / mean b); geometric mean ratio and the
                                                      exponentiated t interval of the mean log ratio; its
-                                                     two-sided p (H0: ratio 1) for Holm's correction
+                                                     two-sided p (H0: ratio 1) for Holm's correction (the same
+                                                     ratio on every shape: a zero-width interval, p 0)
 
 `holm` adjusts the p values of one family of claims (Holm 1979: step-down, controls the family-wise error).
 """
@@ -23,10 +25,9 @@ from typing import Iterable, Mapping
 import numpy as np
 from scipy import stats as _scipy_stats
 
-from ddfbench.report.stats import LEVEL
+from ddfbench.report.stats import LEVEL, summarize_values
 
-BOOTSTRAP_RESAMPLES = 10000
-BOOTSTRAP_SEED = 0
+LOGIT_CLIP = 1e-6
 
 
 @dataclass(frozen=True)
@@ -49,46 +50,49 @@ def shape_means(values: Iterable[tuple[str, float]]) -> dict[str, float]:
     return {shape: float(np.mean(v)) for shape, v in by_shape.items()}
 
 
-def _t_half(logs: np.ndarray, level: float) -> float:
-    return float(_scipy_stats.t.ppf(0.5 + level / 2, len(logs) - 1) * logs.std(ddof=1) / math.sqrt(len(logs)))
+def _exp(logs: np.ndarray, level: float, p: float = math.nan) -> OverShapes:
+    """exp of the mean of logs and of its t interval (NaN bounds below n = 2)."""
+    if len(logs) == 0:
+        return OverShapes(math.nan, math.nan, math.nan, 0)
+    s = summarize_values(logs, level)
+    return OverShapes(math.exp(s.mean), math.exp(s.lo), math.exp(s.hi), s.n, p)
 
 
 def geometric(per_shape: Mapping[str, float], level: float = LEVEL) -> OverShapes:
-    """Geometric mean of positive per-shape values and the exponentiated t interval of their mean log."""
-    logs = np.log([v for v in per_shape.values() if v > 0])
-    if len(logs) == 0:
-        return OverShapes(math.nan, math.nan, math.nan, 0)
-    center = float(np.exp(logs.mean()))
-    if len(logs) == 1:
-        return OverShapes(center, math.nan, math.nan, 1)
-    half = _t_half(logs, level)
-    return OverShapes(center, float(np.exp(logs.mean() - half)), float(np.exp(logs.mean() + half)), len(logs))
+    """Geometric mean of per-shape values and the exponentiated t interval of their mean log. A value <= 0 has no
+    log: it is left out (n says how many remain)."""
+    return _exp(np.log([v for v in per_shape.values() if v > 0]), level)
 
 
 def bounded(per_shape: Mapping[str, float], level: float = LEVEL) -> OverShapes:
-    """Mean of per-shape values in a bounded range and the bootstrap percentile interval of the mean over shapes."""
-    v = np.asarray(list(per_shape.values()), float)
+    """Back-transformed mean logit of per-shape values in [0, 1] and its t interval: inside (0, 1)."""
+    v = np.clip(np.asarray(list(per_shape.values()), float), LOGIT_CLIP, 1 - LOGIT_CLIP)
     if len(v) == 0:
         return OverShapes(math.nan, math.nan, math.nan, 0)
-    if len(v) == 1:
-        return OverShapes(float(v[0]), math.nan, math.nan, 1)
-    rng = np.random.default_rng(BOOTSTRAP_SEED)
-    means = v[rng.integers(0, len(v), size=(BOOTSTRAP_RESAMPLES, len(v)))].mean(axis=1)
-    lo, hi = np.quantile(means, [0.5 - level / 2, 0.5 + level / 2])
-    return OverShapes(float(v.mean()), float(lo), float(hi), len(v))
+    s = summarize_values(np.log(v / (1 - v)), level)
+
+    def expit(x: float) -> float:
+        return 1.0 / (1.0 + math.exp(-x))
+
+    return OverShapes(expit(s.mean), expit(s.lo) if s.n > 1 else math.nan, expit(s.hi) if s.n > 1 else math.nan, s.n)
 
 
 def ratio(a: Mapping[str, float], b: Mapping[str, float], level: float = LEVEL) -> OverShapes:
     """Geometric mean over the shared shapes of a / b (both > 0), its interval and the t test's two-sided p."""
     logs = np.asarray([math.log(a[s] / b[s]) for s in a if s in b and a[s] > 0 and b[s] > 0])
-    if len(logs) == 0:
-        return OverShapes(math.nan, math.nan, math.nan, 0)
-    center = float(np.exp(logs.mean()))
-    if len(logs) == 1 or np.ptp(logs) < 1e-12:  # one shape, or the same ratio on all: no spread to test
-        return OverShapes(center, math.nan, math.nan, len(logs))
-    half = _t_half(logs, level)
-    p = float(_scipy_stats.ttest_1samp(logs, 0.0).pvalue)
-    return OverShapes(center, float(np.exp(logs.mean() - half)), float(np.exp(logs.mean() + half)), len(logs), p)
+    if len(logs) >= 2 and np.ptp(logs) < 1e-12:  # the same ratio on every shape: no spread, no doubt
+        center = float(np.exp(logs.mean()))
+        return OverShapes(center, center, center, len(logs), 0.0 if abs(logs.mean()) > 1e-12 else 1.0)
+    p = float(_scipy_stats.ttest_1samp(logs, 0.0).pvalue) if len(logs) >= 2 else math.nan
+    return _exp(logs, level, p)
+
+
+def fmt(s: OverShapes, scale: float = 1.0) -> str:
+    """'center [lo, hi] (n N)' at 3 significant digits, times scale ('–' without a center, no bounds below n 2)."""
+    if not math.isfinite(s.center):
+        return "–"
+    bounds = f" [{s.lo * scale:.3g}, {s.hi * scale:.3g}]" if math.isfinite(s.lo) else ""
+    return f"{s.center * scale:.3g}{bounds} (n {s.n})"
 
 
 def holm(pvalues: Iterable[float]) -> list[float]:

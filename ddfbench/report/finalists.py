@@ -14,7 +14,7 @@ import math
 from typing import Any
 
 from ddfbench.evaluate.metric_registry import by_name
-from ddfbench.report.across_shapes import OverShapes, geometric, ratio, shape_means
+from ddfbench.report.across_shapes import OverShapes, fmt, geometric, ratio, shape_means
 from ddfbench.report.paired import log_ratio
 from ddfbench.report.records import Record, no_result, ok_records, shape_name
 
@@ -26,35 +26,33 @@ def candidate(rec: Record) -> tuple[str, str]:
     return str(rec.get("model")), str((rec.get("config") or {}).get("capacity"))
 
 
-def _fmt(s: OverShapes, scale: float = 1.0) -> str:
-    if not math.isfinite(s.center):
-        return "–"
-    bounds = f" [{s.lo * scale:.3g}, {s.hi * scale:.3g}]" if math.isfinite(s.lo) else ""
-    return f"{s.center * scale:.3g}{bounds} (n {s.n})"
-
-
 def candidate_rows(records: list[Record]) -> list[dict[str, Any]]:
-    """Per (model, level): shapes run, shapes not converged, the score over the converged shapes, mean steps."""
+    """Per (model, level): shapes run, shapes not converged (a run with no result, or a failed run), the score over
+    the converged shapes, the steps (the largest of its runs)."""
     read = by_name()[CHAMFER].read
-    runs = ok_records(records)
     rows = []
-    for model, level in sorted(dict.fromkeys(candidate(r) for r in runs)):
-        mine = [r for r in runs if candidate(r) == (model, level)]
-        failed = sorted({shape_name(r) for r in mine if no_result(r)})
+    for model, level in sorted(dict.fromkeys(candidate(r) for r in records)):
+        mine = [r for r in records if candidate(r) == (model, level)]
+        failed = sorted({shape_name(r) for r in mine if r.get("status") != "ok" or no_result(r)})
+        mine = ok_records(mine)
         per_shape = shape_means((shape_name(r), read(r)) for r in mine if shape_name(r) not in failed)
         rows.append({"model": model, "level": level, "shapes": len({shape_name(r) for r in mine}),
                      "not_converged": failed, "per_shape": per_shape, "score": geometric(per_shape),
-                     "runs": len(mine), "steps": max(int((r.get("fit") or {}).get("steps") or 0) for r in mine)})
+                     "runs": len(mine), "steps": max((int((r.get("fit") or {}).get("steps") or 0) for r in mine),
+                                                     default=0)})
     return rows
 
 
 def verdicts(records: list[Record], rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
-    """Per model: winner, runner-up, the shape-level and run-level ratio winner / runner-up."""
+    """Per model: winner, runner-up, the shape-level and run-level ratio winner / runner-up. Eligible: a candidate
+    that converged on every shape any candidate of its model ran."""
     read = by_name()[CHAMFER].read
     out = []
     for model in dict.fromkeys(r["model"] for r in rows):
+        shapes = max(r["shapes"] for r in rows if r["model"] == model)
         eligible = sorted((r for r in rows if r["model"] == model and not r["not_converged"]
-                           and math.isfinite(r["score"].center)), key=lambda r: r["score"].center)
+                           and r["score"].n == shapes and math.isfinite(r["score"].center)),
+                          key=lambda r: r["score"].center)
         if len(eligible) < 2:
             out.append({"model": model, "winner": eligible[0]["level"] if eligible else None, "runner_up": None})
             continue
@@ -78,18 +76,19 @@ def sections(records: list[Record]) -> list[str]:
              "score: geometric mean over the tuning shapes of the mean CD-L2 ×10³ over seeds, with the t interval of "
              "the mean log over shapes (n: shapes it converged on). Fixed work: steps as run.", "",
              "| model | level | score CD-L2 ×10³ [95 %] | runs | steps | not converged on |", "|---|---|---|---|---|---|"]
-    lines += [f"| {r['model']} | {r['level']} | {_fmt(r['score'], 1e3)} | {r['runs']} | {r['steps']:,} | "
+    lines += [f"| {r['model']} | {r['level']} | {fmt(r['score'], 1e3)} | {r['runs']} | {r['steps']:,} | "
               f"{', '.join(r['not_converged']) or '–'} |" for r in rows]
     lines += ["", "## Winner against runner-up", "",
               "Ratio of CD-L2 winner / runner-up: by shape (geometric mean of per-shape ratios of seed means, t "
               "interval over shapes) and by run (paired shape x seed, t interval over runs). The winner is "
-              "separable from the runner-up when the by-shape interval lies below 1.", "",
+              "separable from the runner-up when the by-shape interval lies below 1. The winner is picked and tested "
+              "on the same runs, which leans towards 'separable'; a tie here is a tie.", "",
               "| model | winner | runner-up | by shape [95 %] | by run [95 %] | separable |", "|---|---|---|---|---|---|"]
     for v in verdicts(records, rows):
         if v["runner_up"] is None:
             lines.append(f"| {v['model']} | {v['winner'] or 'none converged'} | – | – | – | – |")
             continue
         separable = "yes" if math.isfinite(v["by_shape"].hi) and v["by_shape"].hi < 1 else "no"
-        lines.append(f"| {v['model']} | {v['winner']} | {v['runner_up']} | {_fmt(v['by_shape'])} | "
-                     f"{_fmt(v['by_run'])} | {separable} |")
+        lines.append(f"| {v['model']} | {v['winner']} | {v['runner_up']} | {fmt(v['by_shape'])} | "
+                     f"{fmt(v['by_run'])} | {separable} |")
     return ["\n".join(lines) + "\n"]

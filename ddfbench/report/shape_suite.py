@@ -22,8 +22,10 @@ import pandas as pd
 from scipy import stats as _scipy_stats
 
 from ddfbench.evaluate.metric_registry import by_name
-from ddfbench.report.across_shapes import OverShapes, bounded, geometric, holm, ratio, shape_means
+from ddfbench.report.across_shapes import bounded, fmt, geometric, holm, ratio, shape_means
 from ddfbench.report.records import Record, no_result, ok_records, shape_name
+from ddfbench.report.stats import LEVEL
+from ddfbench.report.tables import pipe_table
 from ddfbench.truth.suite import SUITE_V1
 
 TAGS_FILE = "shapes.csv"
@@ -67,14 +69,6 @@ def tags_table(out_dir: str, names: list[str]) -> pd.DataFrame:
     return df
 
 
-def _fmt(s: OverShapes, scale: float = 1.0) -> str:
-    if not math.isfinite(s.center):
-        return "–"
-    if not math.isfinite(s.lo):
-        return f"{s.center * scale:.3g} (n {s.n})"
-    return f"{s.center * scale:.3g} [{s.lo * scale:.3g}, {s.hi * scale:.3g}] (n {s.n})"
-
-
 def _p(x: float) -> str:
     return "–" if not math.isfinite(x) else f"{x:.2g}"
 
@@ -83,7 +77,7 @@ def cells(records: list[Record], metric: str) -> dict[str, dict[str, float]]:
     """{model: {shape: mean over seeds}} of the metric over the converged (model, shape) cells."""
     read = by_name()[metric].read
     runs = ok_records(records)
-    failed = {(r.get("model"), shape_name(r)) for r in runs if no_result(r)}
+    failed = {(r.get("model"), shape_name(r)) for r in records if r.get("status") != "ok" or no_result(r)}
     out: dict[str, dict[str, float]] = {}
     for model in dict.fromkeys(str(r.get("model")) for r in runs):
         pairs = [(shape_name(r), read(r)) for r in runs if r.get("model") == model and (model, shape_name(r)) not in failed]
@@ -92,13 +86,14 @@ def cells(records: list[Record], metric: str) -> dict[str, dict[str, float]]:
 
 
 def not_converged(records: list[Record]) -> list[dict[str, Any]]:
-    """One row per (model, shape) cell with a run that gave no result: how many of its seeds, steps, epochs."""
+    """One row per (model, shape) cell with a run that gave no result or failed: how many of its seeds, steps,
+    epochs (a failed run counts as no result: it has no metrics)."""
     rows: dict[tuple[str, str], dict[str, Any]] = {}
-    for r in ok_records(records):
+    for r in records:
         row = rows.setdefault((str(r.get("model")), shape_name(r)), {"model": r.get("model"), "shape": shape_name(r),
                                                                       "failed": 0, "seeds": 0})
         row["seeds"] += 1
-        if no_result(r):
+        if r.get("status") != "ok" or no_result(r):
             row["failed"] += 1
             row["steps"] = (r.get("fit") or {}).get("steps")
             row["epochs"] = (r.get("fit") or {}).get("epochs")
@@ -160,14 +155,9 @@ def _welch(a: np.ndarray, b: np.ndarray) -> dict[str, float]:
     if se == 0:
         return {"ratio": math.exp(diff)}
     dof = (va + vb) ** 2 / (va**2 / (len(a) - 1) + vb**2 / (len(b) - 1))
-    half = float(_scipy_stats.t.ppf(0.975, dof)) * se
+    half = float(_scipy_stats.t.ppf(0.5 + LEVEL / 2, dof)) * se
     p = float(2 * _scipy_stats.t.sf(abs(diff) / se, dof))
     return {"ratio": math.exp(diff), "lo": math.exp(diff - half), "hi": math.exp(diff + half), "p": p}
-
-
-def _md(header: list[str], rows: list[list[str]]) -> str:
-    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
-    return "\n".join(lines + ["| " + " | ".join(r) + " |" for r in rows]) + "\n"
 
 
 def tags_markdown(tags: pd.DataFrame) -> str:
@@ -177,7 +167,7 @@ def tags_markdown(tags: pd.DataFrame) -> str:
     rows = [[t["shape"], t["split"], t["kind"], f"{int(t['faces']):,}", num(t["thinnest"], ".3g"), str(int(t["genus"])),
              num(t["sharp_edges"], ".3g"), num(t["detail"], ".3g"), num(t["open_boundary"], ".2g"),
              str(int(t["components"])), t["provenance"], t["license"]] for _, t in tags.iterrows()]
-    return _md(["shape", "split", "kind", "faces", "thinnest", "genus", "creases", "detail", "open boundary",
+    return pipe_table(["shape", "split", "kind", "faces", "thinnest", "genus", "creases", "detail", "open boundary",
                 "components", "provenance", "license"], rows)
 
 
@@ -189,25 +179,25 @@ def sections(records: list[Record], out_dir: str) -> list[str]:
            "(longest side 1; 'open': no inside); genus: handles and through-holes; creases: length of edges over 30° "
            "per sqrt(area); detail: 90th percentile of |mean curvature| in balls of radius 0.01; open boundary: share "
            "of the edge length on a boundary (ddfbench/truth/difficulty.py).\n\n" + tags_markdown(tags)]
-    header = ["model", "CD-L2 ×10³, geometric mean [95 %]", "F@0.01, mean [95 % bootstrap]", "fit s, geometric mean",
+    header = ["model", "CD-L2 ×10³, geometric mean [95 %]", "F@0.01, logit mean [95 %]", "fit s, geometric mean",
               "storage B, geometric mean"]
     out.append("## Each family over the evaluation shapes\n\nn: shapes (each the mean over its seeds; a shape with a "
                "run that gave no result is left out and listed below). Intervals over shapes, on the log scale for "
-               "chamfer, time and bytes (never below 0), by bootstrap for the F-score (never outside [0, 1]). "
+               "chamfer, time and bytes (never below 0), on the logit scale for the F-score (never outside (0, 1)). "
                f"Evaluation points per surface: {_points(records)}.\n\n"
-               + _md(header, [[r["model"], _fmt(r["chamfer"], 1e3), _fmt(r["fscore"]), _fmt(r["fit_s"]),
-                               _fmt(r["storage"])] for r in fam]))
+               + pipe_table(header, [[r["model"], fmt(r["chamfer"], 1e3), fmt(r["fscore"]), fmt(r["fit_s"]),
+                               fmt(r["storage"])] for r in fam]))
     out.append("## Family against family, shape by shape\n\nCD-L2 of a over b: the geometric mean over the shapes "
                "both converged on of the per-shape ratio, with the t interval of the mean log ratio; p: two-sided t "
                "test of log ratio 0; **Holm-corrected across the rows of this table** (one family of claims).\n\n"
-               + _md(["a", "b", "CD-L2 a / b [95 %] (n shapes)", "p", "p (Holm)"],
-                     [[r["a"], r["b"], _fmt(r["ratio"]), _p(r["ratio"].p), _p(r["p_holm"])] for r in pairs]))
+               + pipe_table(["a", "b", "CD-L2 a / b [95 %] (n shapes)", "p", "p (Holm)"],
+                     [[r["a"], r["b"], fmt(r["ratio"]), _p(r["ratio"].p), _p(r["p_holm"])] for r in pairs]))
     out.append("## Along each difficulty axis\n\nPer model: Spearman rho between the tag and the per-shape CD-L2 "
                "over the shapes that have the tag (n); the harder half (above the median tag; for thinnest, below it) "
                "over the easier half: ratio of geometric mean CD-L2 with its Welch t interval, p two-sided, "
                "**Holm-corrected across the six axes within each model**. Shapes at the median fall in the easier "
                "half. by_axis.png plots every shape.\n\n"
-               + _md(["model", "axis", "n", "rho", "harder / easier CD-L2 [95 %]", "p", "p (Holm)"],
+               + pipe_table(["model", "axis", "n", "rho", "harder / easier CD-L2 [95 %]", "p", "p (Holm)"],
                      [[r["model"], AXIS_LABELS[r["axis"]], str(r["n"]), _p(r["rho"]),
                        "–" if not math.isfinite(r["ratio"]) else
                        (f"{r['ratio']:.3g} [{r['lo']:.3g}, {r['hi']:.3g}] ({r.get('n_hard')} vs {r.get('n_easy')})"
@@ -215,7 +205,7 @@ def sections(records: list[Record], out_dir: str) -> list[str]:
                        _p(r["p"]), _p(r["p_holm"])] for r in axes]))
     if failed:
         out.append("## Not converged (left out of the summaries above)\n\n"
-                   + _md(["model", "shape", "runs with no result", "steps", "epochs"],
+                   + pipe_table(["model", "shape", "runs with no result", "steps", "epochs"],
                          [[str(r["model"]), r["shape"], f"{r['failed']} of {r['seeds']}", str(r.get("steps")),
                            str(r.get("epochs"))] for r in failed]))
     pd.DataFrame(axes).to_csv(os.path.join(out_dir, "by_axis.csv"), index=False, float_format="%.6g")

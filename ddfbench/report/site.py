@@ -28,6 +28,7 @@ import numpy as np
 import pandas as pd
 
 from ddfbench.report import compact
+from ddfbench.report.stats import summarize_values
 from ddfbench.report.tables import per_run
 
 AXES = (("render_warm_s", "warm render s"), ("fit_s", "fit or build s"), ("storage_bytes", "bytes"))
@@ -56,10 +57,9 @@ def runs(reports: str) -> pd.DataFrame:
 
 
 def pareto_figure(df: pd.DataFrame, x: str, x_label: str):
-    """The figure of CD-L2 x10^3 against column x: per family one trace of runs (legend group = family) and one of
-    (model, shape) means with 95 % t interval bars; a dropdown shows one shape or all."""
+    """The figure of CD-L2 x10^3 against column x: per family and shape one trace of runs (legend group = family)
+    and one of (report, model) geometric means with interval bars; a dropdown shows one shape or all."""
     import plotly.graph_objects as go
-    from scipy import stats as _scipy_stats
 
     data = df[np.isfinite(df[x].astype(float)) & np.isfinite(df["chamfer_l2"].astype(float))
               & (df[x].astype(float) > 0) & (df["chamfer_l2"].astype(float) > 0)]
@@ -75,15 +75,19 @@ def pareto_figure(df: pd.DataFrame, x: str, x_label: str):
                                      meta={"kind": "runs", "family": family, "shape": shape}))
             trace_shapes.append(shape)
             means = []
-            for (model, _), cell in part.groupby(["model", "report"], sort=True):
-                y = 1e3 * cell["chamfer_l2"].astype(float)
-                half = (float(_scipy_stats.t.ppf(0.975, len(y) - 1)) * y.std(ddof=1) / math.sqrt(len(y))
-                        if len(y) > 1 else 0.0)
-                means.append((cell[x].astype(float).mean(), y.mean(), half, f"{family} / {model}, {shape}: mean of "
-                              f"{len(y)} seed(s), 95 % t interval"))
-            mx, my, mh, mt = zip(*means)
+            for (model, report), cell in part.groupby(["model", "report"], sort=True):
+                # geometric mean over seeds and the exponentiated t interval of the mean log: bars stay above 0 on
+                # the log axis; one seed: no bar
+                s = summarize_values(np.log(1e3 * cell["chamfer_l2"].astype(float)))
+                center = math.exp(s.mean)
+                up, down = ((math.exp(s.hi) - center, center - math.exp(s.lo)) if s.n > 1 else (math.nan, math.nan))
+                means.append((cell[x].astype(float).mean(), center, up, down,
+                              f"{report}: {family} / {model}, {shape}: geometric mean of {s.n} seed(s)"
+                              + (", 95 % t interval of the mean log" if s.n > 1 else ", no interval")))
+            mx, my, up, down, mt = zip(*means)
             fig.add_trace(go.Scatter(x=mx, y=my, mode="markers", name=family, legendgroup=family, showlegend=False,
-                                     error_y={"type": "data", "array": list(mh), "visible": True}, text=list(mt),
+                                     error_y={"type": "data", "array": list(up), "arrayminus": list(down),
+                                              "visible": True}, text=list(mt),
                                      hoverinfo="text+x+y", marker={"size": 11, "symbol": "diamond-open"},
                                      meta={"kind": "means", "family": family, "shape": shape}))
             trace_shapes.append(shape)
@@ -106,8 +110,9 @@ def write_pareto(df: pd.DataFrame, out: str) -> int:
         points += sum(len(t.x) for t in fig.data if t.meta["kind"] == "runs")
         parts.append(fig.to_html(full_html=False, include_plotlyjs=False, div_id=f"pareto-{x}"))
     body = (f"<p>One small point per run ({len(df)} runs of the reports with records: "
-            f"{html.escape(', '.join(sorted(df['report'].unique())) if len(df) else 'none')}); diamonds: the mean per "
-            "preset and shape with its 95 % t interval. Lower left is better.</p>" + "".join(parts))
+            f"{html.escape(', '.join(sorted(df['report'].unique())) if len(df) else 'none')}); diamonds: the geometric "
+            "mean per report, preset and shape with the 95 % t interval of its mean log (no bar: one seed). Lower left "
+            "is better.</p>" + "".join(parts))
     with open(os.path.join(out, "pareto.html"), "w") as fh:
         fh.write(page("Accuracy against cost", body, head=f"<script src='{PLOTLY_JS}'></script>"))
     return points

@@ -74,7 +74,7 @@ def jobs_per_model(entry: Entry) -> dict[str, int]:
         master = loader.load_configuration("config", overrides, run_mode=RunMode.MULTIRUN)
         params = [f"{k}={v}" for k, v in (master.hydra.sweeper.get("params") or {}).items()]
         parsed = OverridesParser.create(config_loader=loader).parse_overrides(params + overrides)
-        default_model = str(master.hydra.runtime.choices.get("model") if "runtime" in master.hydra else master.model)
+        default_model = str(master.hydra.runtime.choices.get("model", "?"))
         counts: dict[str, int] = {}
         for batch in BasicSweeper.split_arguments(parsed, None):
             for job in batch:
@@ -146,8 +146,11 @@ def print_plan(rows: list[dict[str, Any]]) -> None:
 
 def run(suite: str, tier: str, results: str) -> int:
     """Run every experiment of the tier into results/ (resuming), then write its report; the worst exit code."""
+    tiers = load_suite(suite)
+    if tier not in tiers:
+        raise InputError(f"suite {suite}: no tier '{tier}' (tiers: {', '.join(tiers)})")
     rc = 0
-    for entry in load_suite(suite)[tier]:
+    for entry in tiers[tier]:
         cmd = [sys.executable, "-m", "ddfbench", f"+experiment={entry.experiment}", f"out_dir={results}", "quiet=true",
                *entry.overrides]
         print("$", " ".join(cmd[1:]), flush=True)
@@ -165,7 +168,9 @@ def stale(entry: Entry, records: list[dict[str, Any]]) -> tuple[str, list[str]]:
     if not shas:
         return "no records", []
     paths = {"ddfbench/core", "ddfbench/truth", "ddfbench/sampling", "ddfbench/evaluate", "ddfbench/fit",
-             f"conf/experiment/{entry.experiment}.yaml"}
+             "ddfbench/render", "ddfbench/run", f"conf/experiment/{entry.experiment}.yaml"}
+    paths |= {os.path.relpath(os.path.join(root, f), ROOT) for root, _, files in os.walk(os.path.join(ROOT, "ddfbench",
+              "models")) for f in files if f.startswith("_") and f.endswith(".py") and f != "__init__.py"}
     for rec in records:
         family, model = str(rec.get("family")), str(rec.get("model"))
         paths |= {f"ddfbench/models/{family}", f"ddfbench/models/{family}.py", f"conf/model/{model}.yaml",

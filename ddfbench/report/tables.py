@@ -302,6 +302,12 @@ def _footnotes(df: pd.DataFrame) -> list[str]:
     return lines
 
 
+def pipe_table(header: list[str], rows: list[list[str]]) -> str:
+    """A GitHub markdown table of string cells (header, then one line per row)."""
+    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    return "\n".join(lines + ["| " + " | ".join(r) + " |" for r in rows]) + "\n"
+
+
 def to_markdown(df: pd.DataFrame) -> str:
     """A GitHub markdown table, best per column (per shape) in bold, noise floor rows, failures below."""
     if df.empty:

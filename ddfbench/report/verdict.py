@@ -19,12 +19,14 @@ import os
 import sys
 from typing import Any, Callable
 
+from ddfbench.core.errors import InputError
 from ddfbench.evaluate.metric_registry import by_name
 from ddfbench.report import compact
-from ddfbench.report.across_shapes import geometric
+from ddfbench.report.across_shapes import fmt, geometric
 from ddfbench.report.records import Record, no_result, ok_records, shape_name
 from ddfbench.report.shape_suite import cells
 from ddfbench.report.stats import summarize_values
+from ddfbench.report.tables import pipe_table
 
 START, END = "<!-- verdict:start (python -m ddfbench.report.verdict) -->", "<!-- verdict:end -->"
 SHORT, FULL = "default", "shape_suite"
@@ -51,7 +53,9 @@ def _ratio_to_floor(recs: list[Record]) -> str:
 
 def _steps(recs: list[Record]) -> str:
     steps = sorted({int((r.get("fit") or {}).get("steps") or 0) for r in recs})
-    return f"{steps[0]:,} steps" if len(steps) == 1 and steps[0] > 1 else "built"
+    if steps == [0] or steps == [1]:
+        return "built"
+    return " / ".join(f"{n:,}" for n in steps) + " steps"
 
 
 def rows(short: list[Record], full: list[Record]) -> list[list[str]]:
@@ -74,7 +78,7 @@ def rows(short: list[Record], full: list[Record]) -> list[list[str]]:
             suite = "–"
             if label == "own" and model in over_shapes:
                 g = geometric(over_shapes[model])
-                suite = f"{1e3 * g.center:.3g} [{1e3 * g.lo:.3g}, {1e3 * g.hi:.3g}] (n {g.n})" if math.isfinite(g.lo) else "–"
+                suite = fmt(g, 1e3)
             image = (f"{_mean(mine, 'depth_mae', 1e3)} / {_mean(mine, 'mask_iou', 1.0, '.3f')}"
                      if _mean(mine, "mask_iou") != "–" else "–")
             out.append([model, budget, _ratio_to_floor(mine), _mean(mine, "p2s_chamfer_l2", 1e3),
@@ -109,15 +113,13 @@ def table(reports: str) -> str:
     for name in (SHORT, FULL):
         path = os.path.join(reports, name, compact.FILE)
         sets[name] = compact.read_compact(path) if os.path.isfile(path) else []
-    lines = ["| " + " | ".join(HEADER) + " |", "|" + "---|" * len(HEADER)]
-    lines += ["| " + " | ".join(r) + " |" for r in rows(sets[SHORT], sets[FULL])]
-    return "\n".join(lines) + "\n\n" + footnote(sets) + "\n"
+    return pipe_table(HEADER, rows(sets[SHORT], sets[FULL])) + "\n" + footnote(sets) + "\n"
 
 
 def with_block(readme: str, block: str) -> str:
-    """The README text with the block between the markers replaced (InputError-free: missing markers raise)."""
+    """The README text with the block between the markers replaced; InputError when the markers are missing."""
     if START not in readme or END not in readme:
-        raise ValueError(f"the README has no verdict markers ({START} ... {END})")
+        raise InputError(f"the README has no verdict markers ({START} ... {END})")
     head, rest = readme.split(START, 1)
     _, tail = rest.split(END, 1)
     return f"{head}{START}\n{block}{END}{tail}"
@@ -132,9 +134,12 @@ def main(argv: list[str] | None = None) -> int:
     block = table(args.reports)
     verdict_path = os.path.join(args.reports, "verdict.md")
     text = "# Verdict\n\n" + block
-    with open(args.readme) as fh:
-        readme = fh.read()
-    new_readme = with_block(readme, block)
+    try:
+        with open(args.readme) as fh:
+            new_readme = with_block(fh.read(), block)
+    except (OSError, InputError) as exc:
+        print(f"ddfbench.report.verdict: {args.readme}: {getattr(exc, 'strerror', None) or exc}", file=sys.stderr)
+        return 2
     if args.check:
         differ = [p for p, want in ((verdict_path, text), (args.readme, new_readme))
                   if not os.path.isfile(p) or open(p).read() != want]

@@ -1,7 +1,8 @@
 """CAD-like shapes built by constructive solid geometry with manifold3d: sharp edges, holes, thin walls.
 
-Each builder returns a raw watertight trimesh in the same frame as the catalog's builders (longest side 1,
-centred near the origin), so its sizes survive normalization unchanged. manifold3d's booleans are exact
+Each builder returns a raw watertight trimesh in the frame of the catalog's builders (sizes in units of about the
+longest side, centred near the origin); normalization then scales the longest side to exactly 1 (the chain, 0.85
+long and off-centre, is scaled by 1 / 0.85 and centred). manifold3d's booleans are exact
 and always give a manifold result, which is why these are built with it and not with mesh booleans by hand.
 
     bracket            an L bracket (plate 0.08 thick) with a gusset and six bolt holes: genus 6
