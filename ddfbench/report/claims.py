@@ -390,7 +390,8 @@ def write_claims(results_dir: str, out_path: str, carry_from: str | None = None)
         if not old:
             raise InputError(f"--carry {carry_from}: holds no claims table (a claims.md written by --claims)")
         rows, _ = carry(rows, old)
-    md = to_markdown(rows, records, results_dir, carry_from, tuple(codes))
+    shown = "<results>" if os.path.isabs(results_dir) else results_dir  # no machine's folder in a committed file
+    md = to_markdown(rows, records, shown, carry_from, tuple(codes))
     os.makedirs(os.path.dirname(os.path.abspath(out_path)), exist_ok=True)
     with open(out_path, "w") as fh:
         fh.write(md)
