@@ -265,3 +265,21 @@ def test_model_keys_an_experiment_sweeps_are_keys_of_the_models_it_sweeps():
                 load_family(plain["model"]["family"]).configure(plain["model"])  # raises on an unknown key
                 checked += 1
     assert checked >= 2  # render_matched: grid_sdf and neural_sdf_tuned
+
+
+def test_every_experiment_has_a_quick_form_with_one_seed_and_a_step_budget():
+    """`+form=quick` (conf/form/quick.yaml) composes with every experiment, keeps its models and shapes, runs one
+    seed at 200 steps with a light evaluation."""
+    from hydra import compose, initialize_config_dir
+
+    from ddfbench.report.suite import Entry, jobs_per_model
+
+    for name in sorted(f[:-5] for f in os.listdir(os.path.join(CONF_DIR, "experiment")) if f.endswith(".yaml")):
+        if name == "tune":  # the Optuna sweeper: trials, not a grid
+            continue
+        full, quick = jobs_per_model(Entry(name, "x")), jobs_per_model(Entry(name, "x", ["+form=quick"]))
+        assert set(quick) == set(full) and sum(quick.values()) <= sum(full.values()), name
+        with initialize_config_dir(CONF_DIR, version_base="1.3"):
+            cfg = compose("config", overrides=[f"+experiment={name}", "+form=quick"], return_hydra_config=True)
+        assert (cfg.train.budget, cfg.train.max_steps, cfg.eval.n_points) == ("steps", 200, 10000), name
+        assert str(cfg.hydra.sweeper.params.get("seed", "0")) == "0", name
