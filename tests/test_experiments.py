@@ -267,6 +267,7 @@ def test_model_keys_an_experiment_sweeps_are_keys_of_the_models_it_sweeps():
     assert checked >= 2  # render_matched: grid_sdf and neural_sdf_tuned
 
 
+@LARGE
 def test_every_experiment_has_a_quick_form_with_one_seed_and_a_step_budget():
     """`+form=quick` (conf/form/quick.yaml) composes with every experiment, keeps its models and shapes, runs one
     seed at 200 steps with a light evaluation."""
