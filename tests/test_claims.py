@@ -226,3 +226,15 @@ def test_claims_without_records_keep_their_previous_rows_marked_and_the_others_a
     assert report_main([str(tmp_path / "rerun"), "--claims", "--out", str(out), "--carry", str(tmp_path / "none.md")]) == 2
     (tmp_path / "notes.md").write_text("# notes\n\nno table here\n")
     assert report_main([str(tmp_path / "rerun"), "--claims", "--out", str(out), "--carry", str(tmp_path / "notes.md")]) == 2
+
+
+def test_the_storage_order_counts_only_a_g_that_gave_a_mesh_and_names_a_smaller_lod():
+    empty_g = {**rec("storage", "gan_sdf", 1, 8.0, cost={"storage_bytes": 30e3}),
+               "metrics": {"chamfer_l2": 8.0, "empty_reconstruction": True, "n_points": 2000}}
+    lod = rec("storage", "mesh_lod500", 0, 4e-5, cost={"storage_bytes": 9.7e3}, family="mesh")
+    row = {c.claim: c for c in claims.evaluate({"storage": storage(50e3) + [empty_g, lod]})}["G < mesh < grid SDF in storage"]
+    assert row.verdict == claims.CONFIRMED and "G 50.0 kB" in row.measured  # the empty G's 30 kB is not G's size
+    assert "smallest mesh LOD is 9.7 kB, below G" in row.measured and "1 G runs gave no mesh" in row.measured
+    (only_empty,) = [c for c in claims.evaluate({"storage": storage(50e3)[1:] + [empty_g]})
+                     if c.claim == "G < mesh < grid SDF in storage"]
+    assert only_empty.verdict == claims.NOT_CONVERGED
