@@ -50,6 +50,8 @@ PLOTS_BY_EXPERIMENT: dict[str, tuple[str, ...]] = {
     "gan_epochs": ("convergence", "fit_curves"),
     "render_matched": ("render_time",),
     "tune": ("fit_curves",),  # plus reports/tune/tune.png by ddfbench.report.tune
+    "shape_suite": ("fit_curves",),  # plus by_axis.png by ddfbench.report.shape_suite
+    "tune_finalists": ("fit_curves",),
 }
 DEFAULT_PLOTS = ("fit_curves", "pareto")
 COST_AXES = (("render_warm_s", "warm render time (s)"), ("fit_s", "fit time (s)"), ("storage_bytes", "storage (bytes)"))
