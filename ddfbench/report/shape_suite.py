@@ -232,7 +232,7 @@ def sections(records: list[Record], out_dir: str) -> list[str]:
         out.append("## Not converged (left out of the summaries above)\n\n"
                    + pipe_table(["model", "shape", "runs with no result", "steps", "epochs"],
                          [[str(r["model"]), r["shape"], f"{r['failed']} of {r['seeds']}", str(r.get("steps")),
-                           str(r.get("epochs"))] for r in failed]))
+                           "–" if r.get("epochs") is None else f"{float(r['epochs']):.3g}"] for r in failed]))
     pd.DataFrame(axes).to_csv(os.path.join(out_dir, "by_axis.csv"), index=False, float_format="%.6g")
     plot_axes(records, tags, os.path.join(out_dir, "by_axis.png"))
     out.append("![by_axis.png](by_axis.png)")

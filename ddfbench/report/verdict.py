@@ -24,14 +24,15 @@ from ddfbench.evaluate.metric_registry import by_name
 from ddfbench.report import compact
 from ddfbench.report.across_shapes import fmt, geometric
 from ddfbench.report.records import Record, no_result, ok_records, shape_name
-from ddfbench.report.shape_suite import cells
+from ddfbench.report.shape_suite import cells, not_converged
 from ddfbench.report.stats import summarize_values
 from ddfbench.report.tables import pipe_table
 
 START, END = "<!-- verdict:start (python -m ddfbench.report.verdict) -->", "<!-- verdict:end -->"
 SHORT, FULL = "default", "shape_suite"
 SHAPE = "bunny"
-HEADER = ["preset", "budget", "CD-L2 / floor [95 %]", "p2s CD-L2 ×10³", "F@0.005", "depth MAE ×10³ / mask IoU",
+FAMILY_ORDER = ["mesh", "grid_sdf", "neural_sdf", "ddf", "gan_sdf"]  # the reference first, then the fields
+HEADER = ["preset", "budget", "CD-L2 / floor, geometric mean [95 %]", "p2s CD-L2 ×10³", "F@0.005", "depth MAE ×10³ / mask IoU",
           "fit or build s", "warm frame s", "bytes", "over the suite's shapes: CD-L2 ×10³ [95 %]"]
 
 
@@ -45,10 +46,10 @@ def _mean(recs: list[Record], metric: str, scale: float = 1.0, fmt: str = ".3g")
 
 
 def _ratio_to_floor(recs: list[Record]) -> str:
-    s = summarize_values(by_name()["chamfer_l2"].read(r) / _floor(r) for r in recs)
-    if not math.isfinite(s.mean):
-        return "–"
-    return f"{s.mean:.3g}" + (f" [{s.lo:.3g}, {s.hi:.3g}]" if math.isfinite(s.lo) else "") + f" (n {s.n})"
+    """Geometric mean over seeds of CD-L2 / its noise floor, with the exponentiated t interval of the mean log
+    (never below 0)."""
+    ratios = {str(i): by_name()["chamfer_l2"].read(r) / _floor(r) for i, r in enumerate(recs)}
+    return fmt(geometric({k: v for k, v in ratios.items() if math.isfinite(v)}))
 
 
 def _steps(recs: list[Record]) -> str:
@@ -61,7 +62,9 @@ def _steps(recs: list[Record]) -> str:
 def rows(short: list[Record], full: list[Record]) -> list[list[str]]:
     """The table's rows: per model of either record set, its short-budget row then its own-budget row."""
     over_shapes = cells(full, "chamfer_l2")
-    models = list(dict.fromkeys(str(r.get("model")) for r in ok_records(short + full)))
+    family = {str(r.get("model")): str(r.get("family")) for r in ok_records(short + full)}
+    models = sorted(family, key=lambda m: (FAMILY_ORDER.index(family[m]) if family[m] in FAMILY_ORDER
+                                           else len(FAMILY_ORDER), m))
     out = []
     for model in models:
         for recs, label in ((short, "short"), (full, "own")):
@@ -77,8 +80,9 @@ def rows(short: list[Record], full: list[Record]) -> list[list[str]]:
                 continue
             suite = "–"
             if label == "own" and model in over_shapes:
-                g = geometric(over_shapes[model])
-                suite = fmt(g, 1e3)
+                suite = fmt(geometric(over_shapes[model]), 1e3)
+                missed = sum(1 for row in not_converged(full) if row["model"] == model)
+                suite += f"; not converged on {missed} shape{'s' if missed > 1 else ''}" if missed else ""
             image = (f"{_mean(mine, 'depth_mae', 1e3)} / {_mean(mine, 'mask_iou', 1.0, '.3f')}"
                      if _mean(mine, "mask_iou") != "–" else "–")
             out.append([model, budget, _ratio_to_floor(mine), _mean(mine, "p2s_chamfer_l2", 1e3),
