@@ -69,7 +69,7 @@ def test_axis_rows_rank_and_split_at_the_median(tags):
 
 def test_sections_write_the_tables_and_the_plot(tags, tmp_path):
     text = "\n".join(shape_suite.sections(suite_records(), str(tmp_path)))
-    assert "Holm-corrected across the rows" in text and "| c | s0 | 1 of 1 | 100 | 1.0 |" in text
+    assert "Holm-corrected across the rows" in text and "| c | s0 | 1 of 1 | 100 | 1 |" in text
     assert (tmp_path / "by_axis.png").stat().st_size > 10000 and (tmp_path / "by_axis.csv").exists()
 
 
