@@ -31,6 +31,7 @@ from ddfbench.report import compact
 from ddfbench.report.stats import summarize_values
 from ddfbench.report.tables import per_run
 
+PALETTE = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2", "#7f7f7f")
 AXES = (("render_warm_s", "warm render s"), ("fit_s", "fit or build s"), ("storage_bytes", "bytes"))
 PLOTLY_JS = "plotly.min.js"
 STYLE = ("body{font-family:system-ui,sans-serif;margin:1.5em;max-width:1300px}table{border-collapse:collapse;"
@@ -46,13 +47,15 @@ def page(title: str, body: str, head: str = "") -> str:
 
 
 def runs(reports: str) -> pd.DataFrame:
-    """One row per ok run of every report below `reports` that holds records.jsonl.gz (column `report`: its folder)."""
+    """One row per ok run that gave a result (records.no_result: not an empty mesh, not off the shape) of every report
+    below `reports` that holds records.jsonl.gz (column `report`: its folder)."""
     frames = []
     for folder, _, files in sorted(os.walk(reports)):
         if compact.FILE in files:
             df = per_run(compact.read_compact(os.path.join(folder, compact.FILE)))
             df.insert(0, "report", os.path.relpath(folder, reports))
-            frames.append(df[df["status"] == "ok"])
+            # a run that gave no mesh, or one off the shape, is not a method result: its penalty is not plotted
+            frames.append(df[(df["status"] == "ok") & ~df["empty"].astype(bool) & ~df["off"].astype(bool)])
     return pd.concat(frames, ignore_index=True) if frames else pd.DataFrame()
 
 
@@ -65,13 +68,14 @@ def pareto_figure(df: pd.DataFrame, x: str, x_label: str):
               & (df[x].astype(float) > 0) & (df["chamfer_l2"].astype(float) > 0)]
     fig = go.Figure()
     shapes = sorted(data["shape"].unique())
+    colors = {f: PALETTE[i % len(PALETTE)] for i, f in enumerate(sorted(df["family"].unique()))}  # one per family
     trace_shapes: list[str] = []
     for family, fam in data.groupby("family", sort=True):
         for shape, part in fam.groupby("shape", sort=True):
             hover = [f"{r.report}: {r.family} / {r.model}<br>shape {r.shape}, seed {r.seed}" for r in part.itertuples()]
             fig.add_trace(go.Scatter(x=part[x], y=1e3 * part["chamfer_l2"], mode="markers", name=family,
                                      legendgroup=family, showlegend=shape == fam["shape"].min(), text=hover,
-                                     hoverinfo="text+x+y", marker={"size": 7, "opacity": 0.55},
+                                     hoverinfo="text+x+y", marker={"size": 7, "opacity": 0.55, "color": colors[family]},
                                      meta={"kind": "runs", "family": family, "shape": shape}))
             trace_shapes.append(shape)
             means = []
@@ -88,7 +92,8 @@ def pareto_figure(df: pd.DataFrame, x: str, x_label: str):
             fig.add_trace(go.Scatter(x=mx, y=my, mode="markers", name=family, legendgroup=family, showlegend=False,
                                      error_y={"type": "data", "array": list(up), "arrayminus": list(down),
                                               "visible": True}, text=list(mt),
-                                     hoverinfo="text+x+y", marker={"size": 11, "symbol": "diamond-open"},
+                                     hoverinfo="text+x+y", marker={"size": 11, "symbol": "diamond-open",
+                                                                   "color": colors[family]},
                                      meta={"kind": "means", "family": family, "shape": shape}))
             trace_shapes.append(shape)
     buttons = [{"label": "all shapes", "method": "restyle", "args": [{"visible": [True] * len(trace_shapes)}]}]
@@ -109,7 +114,7 @@ def write_pareto(df: pd.DataFrame, out: str) -> int:
         fig = pareto_figure(df, x, label)
         points += sum(len(t.x) for t in fig.data if t.meta["kind"] == "runs")
         parts.append(fig.to_html(full_html=False, include_plotlyjs=False, div_id=f"pareto-{x}"))
-    body = (f"<p>One small point per run ({len(df)} runs of the reports with records: "
+    body = (f"<p>One small point per run that gave a mesh on the shape ({len(df)} runs of the reports with records: "
             f"{html.escape(', '.join(sorted(df['report'].unique())) if len(df) else 'none')}); diamonds: the geometric "
             "mean per report, preset and shape with the 95 % t interval of its mean log (no bar: one seed). Lower left "
             "is better.</p>" + "".join(parts))
