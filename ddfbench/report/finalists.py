@@ -90,7 +90,8 @@ def sections(records: list[Record]) -> list[str]:
               "|---|---|---|---|---|---|---|"]
     for v in verdicts(records, rows):
         if v["runner_up"] is None:
-            lines.append(f"| {v['model']} | {v['winner'] or 'none converged'} | – | – | – | – | {INCUMBENT} (kept) |")
+            lines.append(f"| {v['model']} | {v['winner'] or 'no candidate converged on every shape'} | – | – | – | – | "
+                         f"{INCUMBENT} (kept) |")
             continue
         separable = math.isfinite(v["by_shape"].hi) and v["by_shape"].hi < 1
         use = v["winner"] if separable else f"{INCUMBENT} (kept)"
