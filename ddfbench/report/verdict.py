@@ -40,9 +40,10 @@ def _floor(rec: Record) -> float:
     return float(((rec.get("metrics") or {}).get("noise_floor") or {}).get("chamfer_l2") or math.nan)
 
 
-def _mean(recs: list[Record], metric: str, scale: float = 1.0, fmt: str = ".3g") -> str:
+def _mean(recs: list[Record], metric: str, scale: float = 1.0, spec: str = ".3g") -> str:
+    """The metric's mean over the records, times scale, formatted by spec ('–' where none is finite)."""
     s = summarize_values(by_name()[metric].read(r) for r in recs)
-    return "–" if not math.isfinite(s.mean) else format(s.mean * scale, fmt)
+    return "–" if not math.isfinite(s.mean) else format(s.mean * scale, spec)
 
 
 def _ratio_to_floor(recs: list[Record]) -> str:
