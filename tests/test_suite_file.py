@@ -16,9 +16,11 @@ ROOT = suite.ROOT
 def test_the_core_plan_expands_each_experiment_as_its_sweep_does():
     rows = {r["experiment"]: r for r in suite.plan("v1", "core")}
     assert rows["default"]["jobs"] == len(plugins.members("model", "default")) * 3  # seed=0,1,2 in the suite file
+    assert rows["representations"]["jobs"] == len(plugins.members("model", "representations")) * 4 * 5
+    assert rows["default"]["cpu_hours"] > 0 and rows["default"]["sources"] == ["reports/default"]
+    rows = {r["experiment"]: r for r in suite.plan("v1", "long")}
     assert rows["shape_suite"]["jobs"] == len(plugins.members("model", "shape_suite")) * 12 * 3
     assert rows["tune_finalists"]["jobs"] == len(plugins.members("model", "tune_finalists")) * 3 * 4 * 3
-    assert rows["default"]["cpu_hours"] > 0 and rows["default"]["sources"] == ["reports/default"]
 
 
 def test_a_bad_suite_or_tier_is_one_line_naming_it(tmp_path, monkeypatch):

@@ -98,6 +98,27 @@ def test_the_winner_is_the_lowest_eligible_candidate_and_is_set_against_the_runn
     assert "| m | a | b |" in finalists.sections(records)[0] and "| yes | a |" in finalists.sections(records)[0]
 
 
+def test_an_incumbent_that_missed_a_tuning_shape_gives_way_to_the_winner_even_when_not_separable():
+    records = []
+    for shape_i, shape in enumerate(("cow", "torus", "gear")):
+        for seed in (0, 1, 2):
+            # a: lowest chamfer but empty on the cow once; b and c tied within noise, b just lower
+            records.append(rec("m", shape, seed, 1e-4, level="a", empty=shape == "cow" and seed == 0))
+            records.append(rec("m", shape, seed, 1e-3 * (1 + shape_i) * (1 + 0.1 * seed), level="b"))
+            records.append(rec("m", shape, seed, 1e-3 * (1 + shape_i) * (1 + 0.1 * ((seed + 1) % 3)), level="c"))
+    rows = finalists.candidate_rows(records)
+    (verdict,) = finalists.verdicts(records, rows)
+    assert verdict["winner"] in ("b", "c") and not verdict["incumbent_eligible"]
+    text = finalists.sections(records)[0]
+    assert f"| no | {verdict['winner']} |" in text and "(kept)" not in text.split("## Winner against runner-up")[1]
+    # with a converged everywhere and the same tie, a is kept
+    shapes = {"cow": 0, "torus": 1, "gear": 2}
+    fixed = [rec("m", r["shape"]["name"], r["config"]["seed"], 1e-3 * (1 + shapes[r["shape"]["name"]])
+                 * (1 + 0.1 * ((r["config"]["seed"] + 2) % 3)), level="a") if r["config"]["capacity"] == "a"
+             else r for r in records]
+    assert "a (kept)" in finalists.sections(fixed)[0].split("## Winner against runner-up")[1]
+
+
 def test_the_ddf_sdf_claim_over_shapes_is_refuted_far_from_one_and_confirmed_near_it():
     from ddfbench.report import claims
 

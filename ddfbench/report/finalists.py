@@ -54,8 +54,10 @@ def verdicts(records: list[Record], rows: list[dict[str, Any]]) -> list[dict[str
         eligible = sorted((r for r in rows if r["model"] == model and not r["not_converged"]
                            and r["score"].n == shapes and math.isfinite(r["score"].center)),
                           key=lambda r: r["score"].center)
+        kept = INCUMBENT in {r["level"] for r in eligible}
         if len(eligible) < 2:
-            out.append({"model": model, "winner": eligible[0]["level"] if eligible else None, "runner_up": None})
+            out.append({"model": model, "winner": eligible[0]["level"] if eligible else None, "runner_up": None,
+                        "incumbent_eligible": kept})
             continue
         win, second = eligible[0], eligible[1]
 
@@ -64,10 +66,18 @@ def verdicts(records: list[Record], rows: list[dict[str, Any]]) -> list[dict[str
                     for r in ok_records(records) if candidate(r) == (model, level)}
 
         by_run = log_ratio(runs_of(win["level"]), runs_of(second["level"]))
-        out.append({"model": model, "winner": win["level"], "runner_up": second["level"],
+        out.append({"model": model, "winner": win["level"], "runner_up": second["level"], "incumbent_eligible": kept,
                     "by_shape": ratio(win["per_shape"], second["per_shape"]),
                     "by_run": OverShapes(math.exp(by_run.mean), math.exp(by_run.lo), math.exp(by_run.hi), by_run.n)})
     return out
+
+
+def preset_to_use(verdict: dict[str, Any], separable: bool) -> str:
+    """The level the experiments should run: the winner when separable from its runner-up or when the incumbent is
+    not eligible (it missed a tuning shape), else the incumbent; 'a (kept)' marks no change."""
+    if verdict["winner"] is not None and (separable or not verdict["incumbent_eligible"]):
+        return verdict["winner"]
+    return f"{INCUMBENT} (kept)"
 
 
 def sections(records: list[Record]) -> list[str]:
@@ -85,16 +95,17 @@ def sections(records: list[Record]) -> list[str]:
               "separable from the runner-up when the by-shape interval lies below 1. The winner is picked and tested "
               "on the same runs, which leans towards 'separable'; a tie here is a tie. The preset the experiments use: "
               "the winner when it is separable, else the incumbent (level a, the preset as it was), so that a change "
-              "of preset, which makes every report of it stale, rests on more than seed noise.", "",
+              "of preset, which makes every report of it stale, rests on more than seed noise. An incumbent that did not "
+              "converge on every tuning shape is not kept: the winner replaces it, separable or not.", "",
               "| model | winner | runner-up | by shape [95 %] | by run [95 %] | separable | preset to use |",
               "|---|---|---|---|---|---|---|"]
     for v in verdicts(records, rows):
         if v["runner_up"] is None:
             lines.append(f"| {v['model']} | {v['winner'] or 'no candidate converged on every shape'} | – | – | – | – | "
-                         f"{INCUMBENT} (kept) |")
+                         f"{preset_to_use(v, separable=False)} |")
             continue
         separable = math.isfinite(v["by_shape"].hi) and v["by_shape"].hi < 1
-        use = v["winner"] if separable else f"{INCUMBENT} (kept)"
+        use = preset_to_use(v, separable)
         lines.append(f"| {v['model']} | {v['winner']} | {v['runner_up']} | {fmt(v['by_shape'])} | "
                      f"{fmt(v['by_run'])} | {'yes' if separable else 'no'} | {use} |")
     return ["\n".join(lines) + "\n"]

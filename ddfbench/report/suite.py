@@ -1,4 +1,4 @@
-"""`python -m ddfbench.suite run NAME --tier TIER [--dry-run] [--results DIR]` and `python -m ddfbench.suite status NAME`.
+"""`python -m ddfbench.suite run NAME --tier TIER [--dry-run] [--results DIR] [-- OVERRIDE ...]` and `python -m ddfbench.suite status NAME`.
 
 A suite file (conf/suite/<name>.yaml) names the benchmark: per tier, each experiment with the report folder it
 writes and the overrides its command line adds. `run --dry-run` prints each experiment's jobs per model and its
@@ -144,15 +144,16 @@ def print_plan(rows: list[dict[str, Any]]) -> None:
           "one job at a time; more with unmeasured models)")
 
 
-def run(suite: str, tier: str, results: str) -> int:
-    """Run every experiment of the tier into results/ (resuming), then write its report; the worst exit code."""
+def run(suite: str, tier: str, results: str, extra: list[str] | None = None) -> int:
+    """Run every experiment of the tier into results/ (resuming) with the suite's overrides and then `extra` (e.g. a
+    launcher, threads), then write its report; the worst exit code."""
     tiers = load_suite(suite)
     if tier not in tiers:
         raise InputError(f"suite {suite}: no tier '{tier}' (tiers: {', '.join(tiers)})")
     rc = 0
     for entry in tiers[tier]:
         cmd = [sys.executable, "-m", "ddfbench", f"+experiment={entry.experiment}", f"out_dir={results}", "quiet=true",
-               *entry.overrides]
+               *entry.overrides, *(extra or [])]
         print("$", " ".join(cmd[1:]), flush=True)
         rc = max(rc, subprocess.run(cmd).returncode)
         records_dir = os.path.join(results, str(OmegaConf.load(os.path.join(
@@ -224,6 +225,7 @@ def main(argv: list[str] | None = None) -> int:
     run_p.add_argument("--tier", required=True)
     run_p.add_argument("--dry-run", action="store_true")
     run_p.add_argument("--results", default="results", help="out_dir of the runs (default: results)")
+    run_p.add_argument("overrides", nargs="*", help="Hydra overrides after --, added to every experiment's command")
     status_p = sub.add_parser("status", help="which reports are stale")
     status_p.add_argument("suite")
     args = parser.parse_args(argv)
@@ -233,7 +235,7 @@ def main(argv: list[str] | None = None) -> int:
         if args.dry_run:
             print_plan(plan(args.suite, args.tier))
             return 0
-        return run(args.suite, args.tier, args.results)
+        return run(args.suite, args.tier, args.results, args.overrides)
     except InputError as exc:
         print(f"ddfbench.suite: {exc}", file=sys.stderr)
         return 2
