@@ -54,3 +54,18 @@ def test_status_is_current_at_head_and_names_what_changed_but_not_a_membership_c
     assert suite._only_membership_changed(before, "conf/model/grid_sdf.yaml")
     assert not suite._only_membership_changed(before, "conf/model/neural_sdf.yaml")  # gained its grid keys since
     assert os.path.isfile(os.path.join(ROOT, "conf", "suite", "v1.yaml"))
+
+
+def test_run_adds_the_overrides_after_the_double_dash_to_every_experiment_and_writes_each_report(monkeypatch):
+    commands = []
+
+    class Done:
+        returncode = 0
+
+    monkeypatch.setattr(suite.subprocess, "run", lambda cmd, **_: commands.append(cmd) or Done())
+    assert suite.main(["run", "v1", "--tier", "core", "--results", "out", "--", "threads=1", "hydra/launcher=ray"]) == 0
+    fits = [c for c in commands if c[2] == "ddfbench"]
+    assert [c[3] for c in fits] == [f"+experiment={e.experiment}" for e in suite.load_suite("v1")["core"]]
+    assert all(c[-2:] == ["threads=1", "hydra/launcher=ray"] and "out_dir=out" in c for c in fits)
+    reports = [c for c in commands if c[2] == "ddfbench.report"]
+    assert [c[3] for c in reports][:2] == [os.path.join("out", "default"), os.path.join("out", "representations")]

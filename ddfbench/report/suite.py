@@ -225,17 +225,18 @@ def main(argv: list[str] | None = None) -> int:
     run_p.add_argument("--tier", required=True)
     run_p.add_argument("--dry-run", action="store_true")
     run_p.add_argument("--results", default="results", help="out_dir of the runs (default: results)")
-    run_p.add_argument("overrides", nargs="*", help="Hydra overrides after --, added to every experiment's command")
     status_p = sub.add_parser("status", help="which reports are stale")
     status_p.add_argument("suite")
-    args = parser.parse_args(argv)
+    argv = sys.argv[1:] if argv is None else argv
+    overrides = argv[argv.index("--") + 1:] if "--" in argv else []  # Hydra overrides for every experiment's command
+    args = parser.parse_args(argv[:argv.index("--")] if "--" in argv else argv)
     try:
         if args.command == "status":
             return status(args.suite)
         if args.dry_run:
             print_plan(plan(args.suite, args.tier))
             return 0
-        return run(args.suite, args.tier, args.results, args.overrides)
+        return run(args.suite, args.tier, args.results, overrides)
     except InputError as exc:
         print(f"ddfbench.suite: {exc}", file=sys.stderr)
         return 2
