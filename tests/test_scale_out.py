@@ -1,5 +1,5 @@
-"""Scale-out: the smoke sweep under Hydra's launchers gives a serial run's records; a sweep killed
-with SIGKILL resumes without losing or duplicating a record; --status counts done / failed / missing.
+"""Scale-out: the smoke sweep under Hydra's launchers (joblib, submitit's local executor, a local Ray instance) gives
+a serial run's records; a sweep killed with SIGKILL resumes without losing or duplicating a record; --status counts done / failed / missing.
 """
 
 import os
@@ -135,20 +135,38 @@ def test_device_follows_the_visible_gpus():
 
 # --- launchers give the serial run's records ---------------------------------------------------
 
-@pytest.mark.parametrize("launcher", ["local_parallel", "slurm_local"])
+# Ray on this machine: a local instance of two CPUs, one CPU and no GPU a run, no dashboard.
+RAY_LOCAL = ["hydra.launcher.ray.remote.num_gpus=0", "hydra.launcher.ray.remote.num_cpus=1",
+             "+hydra.launcher.ray.init.num_cpus=2", "+hydra.launcher.ray.init.include_dashboard=false"]
+
+
+def ray_can_start():
+    """None when a local Ray instance starts here, else why not (the test skips, printing it)."""
+    code = "import ray; ray.init(num_cpus=1, include_dashboard=False); ray.shutdown()"
+    try:
+        done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    except subprocess.TimeoutExpired:
+        return "ray.init() did not return in 120 s"
+    return None if done.returncode == 0 else (done.stderr.strip().splitlines() or ["ray.init() failed"])[-1]
+
+
+@pytest.mark.parametrize("launcher", ["local_parallel", "slurm_local", "ray"])
 @pytest.mark.slow
 def test_launcher_records_equal_the_serial_run(serial, tmp_path, launcher):
     serial_dir, expected = serial
-    launch(tmp_path, f"hydra/launcher={launcher}")
+    if launcher == "ray" and (why := ray_can_start()):
+        pytest.skip(f"a local Ray instance cannot start here: {why}")
+    launch(tmp_path, f"hydra/launcher={launcher}", *(RAY_LOCAL if launcher == "ray" else []))
     got = by_key(tmp_path)
     assert set(got) == set(expected)
     for key, rec in got.items():
         assert rec["status"] == "ok", rec["error"]
         assert comparable(rec) == comparable(expected[key]), key
     cores = len(os.sched_getaffinity(0))
-    threads = {"local_parallel": max(1, cores // 2), "slurm_local": 1}[launcher]  # n_jobs=2; cpus_per_task=1
+    # n_jobs=2; cpus_per_task=1; num_cpus=1
+    threads = {"local_parallel": max(1, cores // 2), "slurm_local": 1, "ray": 1}[launcher]
     assert {r["env"]["threads"] for r in got.values()} == {threads}
-    if launcher == "slurm_local":  # gpus_per_node=0: submitit hides every GPU, train.device=auto runs on cpu
+    if launcher != "local_parallel":  # no GPU reserved: submitit and Ray hide every GPU, train.device=auto runs on cpu
         assert {r["env"]["device"] for r in got.values()} == {"cpu"}
     # A mesh builds from the mesh itself: no run built a dataset, none is cached.
     assert not any("dataset" in r["artifacts"] or "n_samples" in r["sampling"] for r in got.values())
