@@ -75,7 +75,23 @@ def test_a_report_goes_beside_its_records_unless_out_names_a_folder(results):
 def test_every_committed_report_with_records_regenerates():
     reports = os.path.join(ROOT, "reports")
     assert reports_with_records(reports)  # reports/default at least
+    assert os.path.isfile(os.path.join(reports, "claims.md"))  # checked too
     assert regenerate_main(["--from-records", "--reports", reports, "--check"]) == 0
+
+
+def test_the_claims_table_comes_from_the_committed_records_and_a_hand_edit_fails(tmp_path, capsys):
+    reports = tmp_path / "reports"
+    shutil.copytree(os.path.join(ROOT, "reports", "shape_suite"), reports / "shape_suite")
+    assert regenerate_main(["--from-records", "--reports", str(reports), "--readme", str(tmp_path / "none.md")]) == 0
+    text = (reports / "claims.md").read_text()
+    assert "`python -m ddfbench.report.regenerate --from-records`" in text
+    over_shapes = next(line for line in text.splitlines() if line.startswith("| DDF as accurate as the neural SDF, over"))
+    assert "(n=12 shapes" in over_shapes and "**refuted**" in over_shapes, over_shapes
+    assert "| `ablation` | **no records** |" in text  # not committed in this copy: no row is carried from elsewhere
+    (reports / "claims.md").write_text(text.replace("**refuted**", "**confirmed**", 1))
+    assert regenerate_main(["--from-records", "--reports", str(reports), "--readme", str(tmp_path / "none.md"),
+                            "--check"]) == 1
+    assert f"{reports / 'claims.md'} differs" in capsys.readouterr().err
 
 
 def test_the_compact_command_packs_a_folder_of_records(results, tmp_path, capsys):

@@ -14,6 +14,9 @@ seeds (or over paired seeds) with n, the experiment and rows it comes from, and 
   not converged    every run gave an empty reconstruction or one off the shape (records.off_shape): not a
                    method result (steps given)
 
+The committed reports/claims.md is made from the committed records alone (write_committed_claims: each
+reports/<experiment>/records.jsonl.gz), by `python -m ddfbench.report.regenerate --from-records`, which CI checks.
+
 Records can live on several machines: with --carry PREVIOUS, a claim whose experiment has no records
 below `results` keeps its row from the previous claims.md, marked † (and the header names the code of
 those rows), so that regenerating some rows does not drop the others.
@@ -33,7 +36,7 @@ from scipy import stats as _scipy_stats
 
 from ddfbench.core.errors import InputError
 from ddfbench.evaluate.metric_registry import by_name
-from ddfbench.report import matched, paired, shape_suite
+from ddfbench.report import compact, matched, paired, shape_suite
 from ddfbench.report.across_shapes import holm
 from ddfbench.report.records import SURFACE_FACTORS, chamfer_l2, empty_mesh, no_result, ok_records, shape_name
 from ddfbench.report.stats import INTERVAL_NAME, Summary, sig3, summarize_values
@@ -107,7 +110,8 @@ def _holm_note(pvalues: list[float]) -> list[str]:
 
 def _missing(claim: str, source: str, paper: str, experiment: str) -> Claim:
     return Claim(claim, source, paper, "–", f"`{experiment}`", NO_RECORDS,
-                 f"run `python -m ddfbench +experiment={experiment}` into the same results folder")
+                 f"run `python -m ddfbench +experiment={experiment}` into the results folder (for the committed "
+                 f"table: its tier of conf/suite/v1.yaml, then commit reports/{experiment}/{compact.FILE})")
 
 
 # ---------------------------------------------------------------- DDF paper
@@ -420,6 +424,13 @@ def load(results_dir: str) -> Records:
             for e in EXPERIMENTS}
 
 
+def load_committed(reports: str) -> Records:
+    """{experiment: records} from each report's committed compact records, reports/<experiment>/records.jsonl.gz
+    (no file: empty)."""
+    path = lambda e: os.path.join(reports, e, compact.FILE)  # noqa: E731
+    return {e: compact.read_compact(path(e)) if os.path.isfile(path(e)) else [] for e in EXPERIMENTS}
+
+
 CARRIED = "† "  # the mark of a row carried from the previous claims.md
 
 
@@ -458,12 +469,13 @@ def carry(new: list[Claim], old: list[Claim]) -> tuple[list[Claim], int]:
 
 
 def to_markdown(claims: list[Claim], records: Records, source: str, carried_from: str | None = None,
-                carried_codes: tuple[str, ...] = ()) -> str:
+                carried_codes: tuple[str, ...] = (), command: str | None = None) -> str:
     """claims.md: a header (command, code commits, interval) and one row per claim; rows marked † were
     carried from `carried_from` (code: carried_codes)."""
     shas = code_commits([r for rs in records.values() for r in rs])
     cell = lambda t: str(t).replace("|", "\\|")  # noqa: E731
-    command = f"python -m ddfbench.report --claims {source}" + (f" --carry {carried_from}" if carried_from else "")
+    command = command or (f"python -m ddfbench.report --claims {source}"
+                          + (f" --carry {carried_from}" if carried_from else ""))
     carried = (f" Rows marked † are carried unchanged from the previous `{carried_from}` (that table was made "
                f"from code: {', '.join(carried_codes) or 'none'}): their experiments have no records below `{source}`."
                if any(c.claim.startswith(CARRIED) for c in claims) else "")
@@ -495,7 +507,18 @@ def write_claims(results_dir: str, out_path: str, carry_from: str | None = None)
             raise InputError(f"--carry {carry_from}: holds no claims table (a claims.md written by --claims)")
         rows, _ = carry(rows, old)
     shown = "<results>" if os.path.isabs(results_dir) else results_dir  # no machine's folder in a committed file
-    md = to_markdown(rows, records, shown, carry_from, tuple(codes))
+    return _write(to_markdown(rows, records, shown, carry_from, tuple(codes)), out_path)
+
+
+def write_committed_claims(reports: str, out_path: str) -> str:
+    """claims.md from the committed records of the reports below `reports` alone (load_committed): what
+    `python -m ddfbench.report.regenerate --from-records` writes and checks."""
+    records = load_committed(reports)
+    return _write(to_markdown(evaluate(records), records, "reports/<experiment>/" + compact.FILE,
+                              command="python -m ddfbench.report.regenerate --from-records"), out_path)
+
+
+def _write(md: str, out_path: str) -> str:
     os.makedirs(os.path.dirname(os.path.abspath(out_path)), exist_ok=True)
     with open(out_path, "w") as fh:
         fh.write(md)
