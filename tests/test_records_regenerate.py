@@ -129,3 +129,22 @@ def test_the_verdict_block_is_what_the_committed_records_give_and_a_hand_edit_fa
     assert "`reports/shape_suite`: no records committed" in table and "| ddf_tuned | short: 3,000 steps |" in table
     (tmp_path / "reports" / "verdict.md").write_text(table.replace("| ddf_tuned | short", "| ddf_tuned | shorter"))
     assert verdict.main(["--reports", str(tmp_path / "reports"), "--readme", str(readme), "--check"]) == 1
+
+
+def test_no_committed_table_holds_an_interval_outside_its_metric_s_range():
+    """Every <metric>_ci_lo/_ci_hi of every committed table.csv lies in the metric's range (stats.metric_range):
+    no chamfer interval below 0, no F-score interval above 1."""
+    import pandas as pd
+
+    from ddfbench.report.stats import metric_range
+
+    outside = []
+    for folder, _, files in os.walk(os.path.join(ROOT, "reports")):
+        if "table.csv" in files:
+            df = pd.read_csv(os.path.join(folder, "table.csv"))
+            for col in (c for c in df.columns if c.endswith(("_ci_lo", "_ci_hi"))):
+                lo, hi = metric_range(col[:-6])
+                values = df[col].dropna()
+                if ((values < lo) | (values > hi)).any():
+                    outside.append(f"{os.path.relpath(folder, ROOT)}: {col}")
+    assert not outside, outside[:10]

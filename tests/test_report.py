@@ -12,7 +12,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from ddfbench.report import plots, records, tables
+from ddfbench.report import plots, records, stats, tables
 from ddfbench.report.__main__ import main as report_main
 from ddfbench.run.runs import write_json_atomic
 
@@ -155,6 +155,21 @@ def test_ci_is_a_t_interval_over_seeds():
     half = sps.t.ppf(0.975, 3) * np.std([1, 2, 4, 3], ddof=1) / 2 * 1e-3
     assert row["chamfer_l2_ci_hi"] - row["chamfer_l2_mean"] == pytest.approx(half)
     assert row["chamfer_l2_mean"] - row["chamfer_l2_ci_lo"] == pytest.approx(half)
+
+
+def test_no_interval_bound_leaves_the_metric_s_range():
+    """Skewed seeds (one chamfer 20x the others, F-scores near 1, a signed offset) give t intervals across 0 and 1;
+    the table cuts them to [0, inf), [0, 1], and leaves the signed offset's alone."""
+    recs = [make_record(seed=s, chamfer=c) for s, c in zip((0, 1, 2), (1e-3, 1e-3, 2e-2))]
+    for r, f, off in zip(recs, (0.999, 0.95, 0.999), (-1e-3, 2e-3, 9e-3)):
+        r["metrics"]["fscore"]["0.01"], r["metrics"]["level_offset"] = f, off
+    row = tables.summarize(recs).iloc[0]
+    raw = stats.summarize_values([1e-3, 1e-3, 2e-2])
+    assert raw.lo < 0 and row["chamfer_l2_ci_lo"] == 0.0 and row["chamfer_l2_ci_hi"] == pytest.approx(raw.hi)
+    assert stats.summarize_values([0.999, 0.95, 0.999]).hi > 1 and row["fscore@0.01_ci_hi"] == 1.0
+    offset = stats.summarize_values([-1e-3, 2e-3, 9e-3])
+    assert offset.lo < 0 and row["level_offset_ci_lo"] == pytest.approx(offset.lo)
+    assert stats.metric_range("normal_angle_deg") == (0.0, 180.0) and stats.metric_range("mask_iou") == (0.0, 1.0)
 
 
 def test_a_new_metric_declaration_reaches_the_table_with_its_empty_penalty(monkeypatch):

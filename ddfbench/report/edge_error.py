@@ -37,7 +37,7 @@ from scipy import ndimage
 from ddfbench.core.errors import InputError
 from ddfbench.report.records import no_result
 from ddfbench.report.reevaluate import artifact, finished_records, measured_header, unreadable
-from ddfbench.report.stats import summarize_values
+from ddfbench.report.stats import summarize_values, within_range
 from ddfbench.report.tables import NOT_CONVERGED
 
 BANDS = (("edge", 0.0), ("near", 2.0), ("mid", 4.0), ("far", math.inf))  # name, largest distance (px)
@@ -140,9 +140,10 @@ COLUMNS = (("pixels_near", "pixels ≤ 2 px of an edge %", 100), ("mask_errors_n
            ("mask_iou", "mask IoU", 1))
 
 
-def _cell(values: pd.Series, scale: float, runs: int) -> str:
-    """mean ± std [95 % t interval] of the finite values, scaled; "(n = k)" where k < runs are finite."""
-    s = summarize_values(values)
+def _cell(values: pd.Series, key: str, scale: float, runs: int) -> str:
+    """mean ± std [95 % t interval, cut to the figure's range] of the finite values, scaled; "(n = k)" where k < runs
+    are finite."""
+    s = within_range(summarize_values(values), key)
     if s.n == 0:
         return "–"
     text = f"{s.mean * scale:.3g}"
@@ -157,14 +158,14 @@ def to_markdown(runs: pd.DataFrame) -> str:
     lines = ["| model | shape | capacity | n | " + " | ".join(title for _, title, _ in COLUMNS) + " |",
              "|---" * (4 + len(COLUMNS)) + "|"]
     for (model, shape, capacity), group in runs.groupby(["model", "shape", "capacity"], sort=True):
-        cells = [_cell(group[key], scale, len(group)) for key, _, scale in COLUMNS]
+        cells = [_cell(group[key], key, scale, len(group)) for key, _, scale in COLUMNS]
         n = f"{len(group)} {NOT_CONVERGED}" if group["no_result"].all() else str(len(group))
         lines.append(f"| {model} | {shape} | {capacity} | {n} | " + " | ".join(cells) + " |")
     lines += ["", "An edge pixel is one of the oracle's frame where the hit mask changes or the depth jumps (module "
               "docstring of ddfbench/report/edge_error.py); '≤ 2 px': within 2 pixels of one. 'mask errors': pixels exactly one "
               "render hits; 'summed depth error': Σ|t − t_ref| over the pixels both hit. depth MAE and mask IoU over all "
               "pixels are the record's own image metrics, computed again (a control). Mean ± std [95 % t interval of the "
-              "mean] over seeds; '(n = k)': only k of the row's runs define the figure (the others hit no such pixel); "
+              "mean, cut to the figure's range] over seeds; '(n = k)': only k of the row's runs define the figure (the others hit no such pixel); "
               f"'{NOT_CONVERGED}': every run's mesh was empty or off the shape, not a method result."]
     return "\n".join(lines) + "\n"
 

@@ -1,8 +1,8 @@
 """Statistics over seeds: mean, std, a Student t 95 % interval and interval overlap (paired
 differences: report.paired).
 
-The interval is the t interval of the mean over seeds, mean ± t(0.975, n−1)·s/√n; it needs n ≥ 2
-(NaN bounds otherwise). It assumes roughly normal seed-to-seed scatter; with n = 3 it is wide
+The interval is the t interval of the mean over seeds, mean ± t(0.975, n−1)·s/√n, cut to the metric's range in
+tables (within_range); it needs n ≥ 2 (NaN bounds otherwise). It assumes roughly normal seed-to-seed scatter; with n = 3 it is wide
 (t = 4.30), which is the honest width at that n.
 """
 
@@ -43,6 +43,28 @@ def summarize_values(values: Iterable[float], level: float = LEVEL) -> Summary:
     std = float(v.std(ddof=1))
     half = float(_scipy_stats.t.ppf(0.5 + level / 2, n - 1)) * std / math.sqrt(n)
     return Summary(mean, std, n, mean - half, mean + half)
+
+
+SHARES = ("fscore@", "mask_iou", "normal_consistency", "closed")  # values in [0, 1]
+SIGNED = ("level_offset",)  # a signed offset: any real value
+
+
+def metric_range(name: str) -> tuple[float, float]:
+    """The values a reported metric can take: [0, 1] for shares (F-scores, IoU, normal consistency, the closed
+    flag), [0, 180] for angles in degrees, the real line for signed offsets, [0, inf) for the rest (distances,
+    times, sizes, counts)."""
+    if name.startswith(SHARES):
+        return 0.0, 1.0
+    if name.startswith(SIGNED):
+        return -math.inf, math.inf
+    return (0.0, 180.0) if name.endswith("_deg") else (0.0, math.inf)
+
+
+def within_range(s: Summary, name: str) -> Summary:
+    """s with its interval cut to the metric's range: the true mean lies in the range, so the cut interval covers it
+    whenever the t interval does (same level), and no bound reads as a value the metric cannot take."""
+    lo, hi = metric_range(name)
+    return Summary(s.mean, s.std, s.n, min(max(s.lo, lo), hi), max(min(s.hi, hi), lo)) if s.n > 1 else s
 
 
 def sig3(x: float, scale: float = 1.0) -> str:

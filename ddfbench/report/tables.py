@@ -23,7 +23,7 @@ import pandas as pd
 
 from ddfbench.evaluate import metric_registry
 from ddfbench.report.records import OFF_SHAPE_RULE, empty_mesh, off_shape
-from ddfbench.report.stats import INTERVAL_NAME, best_and_ties, summarize_values
+from ddfbench.report.stats import INTERVAL_NAME, best_and_ties, summarize_values, within_range
 from ddfbench.run.runs import NON_SEMANTIC_KEYS
 
 FLOOR_MODEL = "noise floor"  # the `model` cell of a noise-floor row
@@ -162,7 +162,7 @@ def summarize(records: Iterable[dict[str, Any]]) -> pd.DataFrame:
         entry["errors"] = "; ".join(sorted({m["error"] for m in members if m["error"]}))
         entry["keys"] = " ".join(sorted(m["key"] for m in members))
         for name in _metrics():
-            summary = summarize_values(m[name] for m in ok)
+            summary = within_range(summarize_values(m[name] for m in ok), name)
             entry[f"{name}_mean"], entry[f"{name}_std"] = summary.mean, summary.std
             entry[f"{name}_ci_lo"], entry[f"{name}_ci_hi"] = summary.lo, summary.hi
             entry[f"{name}_n"] = summary.n  # runs that define it: fewer than n where a run has none (NaN)
@@ -317,7 +317,7 @@ def to_markdown(df: pd.DataFrame) -> str:
     lines += ["| " + " | ".join(r) + " |" for r in body]
     per_shape = " per shape" if df["shape"].nunique() > 1 else ""
     lines += ["", f"Mean ± std over seeds, n runs. Bold: best per column{per_shape}, its {INTERVAL_NAME} "
-              f"(table.csv: _ci_lo, _ci_hi) overlapping no other row's; {TIE}: tied, the intervals of these "
+              f"(table.csv: _ci_lo, _ci_hi; cut to the metric's range) overlapping no other row's; {TIE}: tied, the intervals of these "
               f"values overlap the best one's (with n = 1 every value is tied). "
               f"'{FLOOR_MODEL}': GT against an independent resample of GT (the sampled metric cannot resolve "
               f"below it); the point-to-surface (p2s) chamfer measures exact distances and has no such floor."]
