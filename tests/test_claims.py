@@ -266,3 +266,25 @@ def test_the_thesis_summary_rows_read_storage_and_the_40_epoch_gan():
         gan = [rec("gan_epochs", "gan_sdf", s, jitter(s, g_cd), family="gan_sdf") for s in SEEDS]
         got = verdicts(records(gan_epochs=gan, representations=representations(3.0) + grid))
         assert got["G's error small against the grid SDF's"] == verdict
+
+
+def grid_encodings(grid_gap, mlp_gap=10.0):
+    """The DDF at grid_gap x the grid SDF's chamfer and mlp_gap x the MLP SDF's, on three shapes (a spread by shape)."""
+    out = []
+    for shape, base in (("bunny", 1e-5), ("cup", 3e-5), ("chain", 2e-5)):
+        spread = {"bunny": 1.0, "cup": 1.1, "chain": 0.9}[shape]
+        for model, family, cd in ((claims.GRID_DDF, "ddf", base * grid_gap * spread), (claims.GRID_SDF, "neural_sdf", base),
+                                  (claims.DDF, "ddf", 3 * base * mlp_gap / spread), (claims.SDF, "neural_sdf", 3 * base)):
+            out += [rec("grid_encodings", model, s, jitter(s, cd), shape=shape, family=family) for s in SEEDS]
+    return out
+
+
+@pytest.mark.parametrize("grid_gap,verdict", [(1.1, claims.CONFIRMED), (8.0, claims.REFUTED)])
+def test_the_same_encoding_row_asks_whether_the_grid_pair_is_as_accurate(grid_gap, verdict):
+    (row,) = [c for c in claims.evaluate({"grid_encodings": grid_encodings(grid_gap)})
+              if c.claim == "the DDF's gap to the SDF closes with the same encoding"]
+    assert row.verdict == verdict
+    # per shape the grid ratio is grid_gap x (1, 1.1, 0.9) and the MLP ratio 10 / (1, 1.1, 0.9)
+    assert f"{claims.GRID_DDF}/{claims.GRID_SDF} {grid_gap * (1.1 * 0.9) ** (1 / 3):.3g}×" in row.measured
+    assert "(n=3 shapes)" in row.measured
+    assert verdicts({})["the DDF's gap to the SDF closes with the same encoding"] == claims.NO_RECORDS
