@@ -69,3 +69,15 @@ def test_run_adds_the_overrides_after_the_double_dash_to_every_experiment_and_wr
     assert all(c[-2:] == ["threads=1", "hydra/launcher=ray"] and "out_dir=out" in c for c in fits)
     reports = [c for c in commands if c[2] == "ddfbench.report"]
     assert [c[3] for c in reports][:2] == [os.path.join("out", "default"), os.path.join("out", "representations")]
+
+
+def test_the_version_is_the_suite_s_and_the_changelog_opens_with_it():
+    from omegaconf import OmegaConf
+
+    import ddfbench
+
+    suite_version = OmegaConf.load(os.path.join(ROOT, "conf", "suite", "v1.yaml")).version
+    assert ddfbench.__version__.split(".")[0] == str(suite_version)
+    with open(os.path.join(ROOT, "CHANGELOG.md")) as fh:
+        first = next(line for line in fh if line.startswith("## "))
+    assert first.startswith(f"## {ddfbench.__version__} — suite v{suite_version}")
