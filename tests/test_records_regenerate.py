@@ -148,3 +148,22 @@ def test_no_committed_table_holds_an_interval_outside_its_metric_s_range():
                 if ((values < lo) | (values > hi)).any():
                     outside.append(f"{os.path.relpath(folder, ROOT)}: {col}")
     assert not outside, outside[:10]
+
+
+def test_the_verdict_s_own_rows_take_their_frames_from_render_time_s_largest_images():
+    import copy
+
+    from ddfbench.report import verdict
+
+    short = compact.read_compact(os.path.join(ROOT, "reports", "default", compact.FILE))
+    ddf = [r for r in short if r["model"] == "ddf_tuned"]
+    frames = []
+    for width, warm in ((64, 1.0), (128, 9.99)):
+        for r in copy.deepcopy(ddf):
+            r["scene"]["width"], r["cost"]["render_warm_s"] = width, warm
+            frames.append(r)
+    rows = {(r[0], r[1].split(":")[0]): r for r in verdict.rows(short, short, frames)}
+    header = verdict.HEADER.index("warm frame s")
+    assert rows[("ddf_tuned", "own")][header] == "9.99"  # the 128² frames, not the 64² ones nor the run's own
+    assert rows[("ddf_tuned", "short")][header] != "9.99"
+    assert rows[("mesh", "own")][header] == "–"  # no render_time record of the mesh here
