@@ -167,3 +167,7 @@ def test_the_verdict_s_own_rows_take_their_frames_from_render_time_s_largest_ima
     assert rows[("ddf_tuned", "own")][header] == "9.99"  # the 128² frames, not the 64² ones nor the run's own
     assert rows[("ddf_tuned", "short")][header] != "9.99"
     assert rows[("mesh", "own")][header] == "–"  # no render_time record of the mesh here
+    for r in frames:  # another preset under the same name (its learning rate changed): not this row's frames
+        r["config"]["model"]["lr"] = 2 * r["config"]["model"]["lr"]
+    rows = {(r[0], r[1].split(":")[0]): r for r in verdict.rows(short, short, frames)}
+    assert rows[("ddf_tuned", "own")][header] == "–"

@@ -66,7 +66,8 @@ def test_run_adds_the_overrides_after_the_double_dash_to_every_experiment_and_wr
     assert suite.main(["run", "v1", "--tier", "core", "--results", "out", "--", "threads=1", "hydra/launcher=ray"]) == 0
     fits = [c for c in commands if c[2] == "ddfbench"]
     assert [c[3] for c in fits] == [f"+experiment={e.experiment}" for e in suite.load_suite("v1")["core"]]
-    assert all(c[-2:] == ["threads=1", "hydra/launcher=ray"] and "out_dir=out" in c for c in fits)
+    assert all(c[4:] == ["out_dir=out", "quiet=true", *suite.load_suite("v1")["core"][i].overrides, "threads=1",
+                         "hydra/launcher=ray"] for i, c in enumerate(fits))  # no "--" leaks into a command
     reports = [c for c in commands if c[2] == "ddfbench.report"]
     assert [c[3] for c in reports][:2] == [os.path.join("out", "default"), os.path.join("out", "representations")]
 

@@ -61,9 +61,21 @@ def _steps(recs: list[Record]) -> str:
     return " / ".join(f"{n:,}" for n in steps) + " steps"
 
 
-def largest_frames(frames: list[Record], model: str) -> list[Record]:
-    """The model's render_time records on the bunny at the largest image size: the own-budget row's frames."""
-    mine = [r for r in ok_records(frames) if r.get("model") == model and shape_name(r) == SHAPE]
+def same_preset(a: Record, b: Record) -> bool:
+    """Whether two records ran the same model config: equal on every key both have (a key one of them lacks was added
+    to the family since, at its default)."""
+    ma, mb = (a.get("config") or {}).get("model") or {}, (b.get("config") or {}).get("model") or {}
+    return all(ma[k] == mb[k] for k in ma.keys() & mb.keys())
+
+
+def largest_frames(frames: list[Record], like: list[Record]) -> list[Record]:
+    """render_time's records of the same preset as `like` (same model name and config, same steps) on the bunny, at
+    the largest image size: the own-budget row's frames."""
+    if not like:
+        return []
+    steps = {(r.get("fit") or {}).get("steps") for r in like}
+    mine = [r for r in ok_records(frames) if r.get("model") == like[0].get("model") and shape_name(r) == SHAPE
+            and same_preset(r, like[0]) and (r.get("fit") or {}).get("steps") in steps]
     width = max(((r.get("scene") or {}).get("width") or 0 for r in mine), default=0)
     return [r for r in mine if ((r.get("scene") or {}).get("width") or 0) == width]
 
@@ -93,7 +105,7 @@ def rows(short: list[Record], full: list[Record], frames: list[Record] = ()) -> 
                 suite = fmt(geometric(over_shapes[model]), 1e3)
                 missed = sum(1 for row in not_converged(full) if row["model"] == model)
                 suite += f"; not converged on {missed} shape{'s' if missed > 1 else ''}" if missed else ""
-            rendered = mine if label == "short" else largest_frames(list(frames), model)
+            rendered = mine if label == "short" else largest_frames(list(frames), mine)
             image = (f"{_mean(rendered, 'depth_mae', 1e3)} / {_mean(rendered, 'mask_iou', 1.0, '.3f')}"
                      if _mean(rendered, "mask_iou") != "–" else "–")
             out.append([model, budget, _ratio_to_floor(mine), _mean(mine, "p2s_chamfer_l2", 1e3),
