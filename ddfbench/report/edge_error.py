@@ -143,7 +143,7 @@ COLUMNS = (("pixels_near", "pixels ≤ 2 px of an edge %", 100), ("mask_errors_n
 def _cell(values: pd.Series, key: str, scale: float, runs: int) -> str:
     """mean ± std [95 % t interval, cut to the figure's range] of the finite values, scaled; "(n = k)" where k < runs
     are finite."""
-    s = within_range(summarize_values(values), key)
+    s = within_range(summarize_values(values), key, (0.0, 1.0) if scale == 100 else None)  # shares print as %
     if s.n == 0:
         return "–"
     text = f"{s.mean * scale:.3g}"

@@ -141,8 +141,7 @@ def from_records(reports: str, check: bool, readme: str | None = None) -> int:
     elif os.path.isfile(claims_md):  # a reports folder without a claims table (a scratch one) has none to check
         with tempfile.TemporaryDirectory() as scratch:
             write_committed_claims(reports, os.path.join(scratch, "claims.md"))
-            if not (filecmp.cmp(claims_md, os.path.join(scratch, "claims.md"),
-                                                              shallow=False)):
+            if not filecmp.cmp(claims_md, os.path.join(scratch, "claims.md"), shallow=False):
                 differing.append(claims_md)
     for path in differing:
         print(f"ddfbench.report.regenerate: {path} differs from its rebuild from {compact.FILE}", file=sys.stderr)

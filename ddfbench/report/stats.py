@@ -60,10 +60,11 @@ def metric_range(name: str) -> tuple[float, float]:
     return (0.0, 180.0) if name.endswith("_deg") else (0.0, math.inf)
 
 
-def within_range(s: Summary, name: str) -> Summary:
-    """s with its interval cut to the metric's range: the true mean lies in the range, so the cut interval covers it
-    whenever the t interval does (same level), and no bound reads as a value the metric cannot take."""
-    lo, hi = metric_range(name)
+def within_range(s: Summary, name: str, bounds: tuple[float, float] | None = None) -> Summary:
+    """s with its interval cut to the metric's range (metric_range(name), or `bounds`): the true mean lies in the
+    range, so the cut interval covers it whenever the t interval does (same level), and no bound reads as a value
+    the metric cannot take."""
+    lo, hi = bounds or metric_range(name)
     return Summary(s.mean, s.std, s.n, min(max(s.lo, lo), hi), max(min(s.hi, hi), lo)) if s.n > 1 else s
 
 
