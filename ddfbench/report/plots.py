@@ -52,6 +52,7 @@ PLOTS_BY_EXPERIMENT: dict[str, tuple[str, ...]] = {
     "tune": ("fit_curves",),  # plus reports/tune/tune.png by ddfbench.report.tune
     "shape_suite": ("fit_curves",),  # plus by_axis.png by ddfbench.report.shape_suite
     "tune_finalists": ("fit_curves",),
+    "grid_encodings": ("fit_curves", "pareto"),
 }
 DEFAULT_PLOTS = ("fit_curves", "pareto")
 COST_AXES = (("render_warm_s", "warm render time (s)"), ("fit_s", "fit time (s)"), ("storage_bytes", "storage (bytes)"))
