@@ -38,7 +38,15 @@ from ddfbench.core.errors import InputError
 from ddfbench.evaluate.metric_registry import by_name
 from ddfbench.report import across_shapes, compact, matched, paired, shape_suite
 from ddfbench.report.across_shapes import holm, shape_means
-from ddfbench.report.records import SURFACE_FACTORS, chamfer_l2, empty_mesh, no_result, ok_records, shape_name
+from ddfbench.report.records import (
+    SURFACE_FACTORS,
+    at_largest_image,
+    chamfer_l2,
+    empty_mesh,
+    no_result,
+    ok_records,
+    shape_name,
+)
 from ddfbench.report.stats import Summary, sig3, summarize_values, within_range
 from ddfbench.run.runs import code_commits, find_records
 
@@ -306,20 +314,13 @@ def accurate_as_sdf_over_shapes(records: Records) -> list[Claim]:
                   f"ratios (one family of claims). {AS_ACCURATE_RULE} A refutation also needs Holm p < 0.05.")]
 
 
-def _largest_frames(recs: list[dict[str, Any]]) -> tuple[int, list[dict[str, Any]]]:
-    """(width, the ok records rendered at the largest image width): one frame time per fitted model, so that pairs
-    are seeds, not seeds x image sizes of the same fit."""
-    width = max(((r.get("scene") or {}).get("width") or 0 for r in ok_records(recs)), default=0)
-    return width, [r for r in ok_records(recs) if ((r.get("scene") or {}).get("width") or 0) == width]
-
-
 def renders_faster(records: Records) -> list[Claim]:
     """Fig. 5 / conclusion: DDFs render faster than SDFs and triangle meshes."""
     src, recs = "DDF Fig. 5, §VII", records.get("render_time") or []
     paper = "DDF renders (depth, normals) faster than BVH meshes and SDFs, on an RTX 3090"
     if not ok_records(recs):
         return [_missing("DDF renders faster than SDF and mesh", src, paper, "render_time")]
-    width, largest = _largest_frames(recs)
+    width, largest = at_largest_image(recs)
     pick = lambda m: paired.values(largest, "render_warm_s", lambda r: r.get("model") == m,  # noqa: E731
                                    paired.seed_key)
     ratios = {other: paired.log_ratio(pick(DDF), pick(other)) for other in (SDF, "mesh")}
@@ -384,7 +385,7 @@ def render_costs(records: Records) -> list[Claim]:
     if not ok_records(recs):
         return [_missing(n, src, p, "render_time") for n, src, p in zip(names, sources,
                                                                          (cold_paper, bvh_paper, normal_paper))]
-    width, largest = _largest_frames(recs)
+    width, largest = at_largest_image(recs)
     pick = lambda m, metric: paired.values(largest, metric, lambda r: r.get("model") == m,  # noqa: E731
                                            paired.seed_key)  # one pair per fitted model: the largest image
     gpu = any(str((r.get("env") or {}).get("device", "")).startswith("cuda") for r in largest)

@@ -15,8 +15,8 @@ from typing import Any, Iterable
 
 from ddfbench.evaluate.metric_registry import FSCORE_RADII, as_float, by_name
 
-__all__ = ["OFF_SHAPE_RULE", "Record", "WIDEST_F", "as_float", "chamfer_l2", "empty_mesh", "no_result", "off_shape",
-           "ok_records", "shape_name"]
+__all__ = ["OFF_SHAPE_RULE", "Record", "WIDEST_F", "as_float", "at_largest_image", "chamfer_l2", "empty_mesh",
+           "no_result", "off_shape", "ok_records", "shape_name"]
 
 WIDEST_F = f"fscore@{max(FSCORE_RADII)}"  # 0 there: no sampled point of either surface near the other
 OFF_SHAPE_RULE = f"{by_name()[WIDEST_F].label} = 0"  # as the reports write it
@@ -57,3 +57,11 @@ def off_shape(rec: Record) -> bool:
 def no_result(rec: Record) -> bool:
     """An empty reconstruction or one off the shape: not a method result."""
     return empty_mesh(rec) or off_shape(rec)
+
+
+def at_largest_image(records: Iterable[Record]) -> tuple[int, list[Record]]:
+    """(width in pixels, the ok records rendered at the largest image width among them): one frame time per fitted
+    model where a sweep rendered each fit at several sizes."""
+    ok = ok_records(records)
+    width = max(((r.get("scene") or {}).get("width") or 0 for r in ok), default=0)
+    return width, [r for r in ok if ((r.get("scene") or {}).get("width") or 0) == width]

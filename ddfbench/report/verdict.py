@@ -24,7 +24,7 @@ from ddfbench.core.errors import InputError
 from ddfbench.evaluate.metric_registry import by_name
 from ddfbench.report import compact
 from ddfbench.report.across_shapes import fmt, geometric
-from ddfbench.report.records import Record, no_result, ok_records, shape_name
+from ddfbench.report.records import Record, at_largest_image, no_result, ok_records, shape_name
 from ddfbench.report.shape_suite import cells, not_converged
 from ddfbench.report.stats import summarize_values
 from ddfbench.report.tables import pipe_table
@@ -74,10 +74,8 @@ def largest_frames(frames: list[Record], like: list[Record]) -> list[Record]:
     if not like:
         return []
     steps = {(r.get("fit") or {}).get("steps") for r in like}
-    mine = [r for r in ok_records(frames) if r.get("model") == like[0].get("model") and shape_name(r) == SHAPE
-            and same_preset(r, like[0]) and (r.get("fit") or {}).get("steps") in steps]
-    width = max(((r.get("scene") or {}).get("width") or 0 for r in mine), default=0)
-    return [r for r in mine if ((r.get("scene") or {}).get("width") or 0) == width]
+    return at_largest_image(r for r in frames if r.get("model") == like[0].get("model") and shape_name(r) == SHAPE
+                            and same_preset(r, like[0]) and (r.get("fit") or {}).get("steps") in steps)[1]
 
 
 def rows(short: list[Record], full: list[Record], frames: list[Record] = ()) -> list[list[str]]:
