@@ -52,8 +52,8 @@ from ddfbench.run.runs import code_commits, find_records
 
 CONFIRMED, REFUTED, NOT_SEPARABLE, NOT_TESTABLE, NO_RECORDS, NOT_CONVERGED = (
     "confirmed", "refuted", "not separable at n", "not testable here", "no records", "not converged")
-EXPERIMENTS = ("ablation", "sampling", "representations", "paper_ddf", "render_time", "render_matched", "storage",
-               "shape_suite", "gan_epochs", "grid_encodings")
+EXPERIMENTS = ("ablation", "sampling", "representations", "paper_ddf", "render_time", "render_shapes", "render_matched",
+               "storage", "shape_suite", "gan_epochs", "grid_encodings")
 GRID_DDF, GRID_SDF = "ddf_line_grid", "neural_sdf_grid"  # the DDF and the SDF reading the same feature grid
 DDF, SDF = matched.REFERENCE, "neural_sdf_tuned"  # the DDF and neural SDF presets representations and render_time run
 EQUIVALENCE = 1.5  # "as accurate as": the DDF/SDF chamfer ratio's interval within [1/1.5, 1.5]
@@ -274,9 +274,9 @@ def gap_with_the_same_encoding(records: Records) -> list[Claim]:
                   "ratio / MLP ratio below 1 is the part of the gap the encoding closes.")]
 
 
-def _over_shapes(r: across_shapes.OverShapes) -> str:
-    return f"{r.center:.3g}× [{r.lo:.3g}, {r.hi:.3g}] (n={r.n} shapes)" if r.n > 1 else \
-        (f"{r.center:.3g}× (n={r.n} shape, no interval)" if r.n else "–")
+def _over_shapes(r: across_shapes.OverShapes, unit: str = "shapes") -> str:
+    return f"{r.center:.3g}× [{r.lo:.3g}, {r.hi:.3g}] (n={r.n} {unit})" if r.n > 1 else \
+        (f"{r.center:.3g}× (n={r.n}, no interval)" if r.n else "–")
 
 
 def _as_accurate(ratio: across_shapes.OverShapes, p_holm: float | None = None) -> str:
@@ -314,27 +314,90 @@ def accurate_as_sdf_over_shapes(records: Records) -> list[Claim]:
                   f"ratios (one family of claims). {AS_ACCURATE_RULE} A refutation also needs Holm p < 0.05.")]
 
 
+RENDER_EXPERIMENTS = ("render_shapes", "render_time")  # frame costs over the evaluation shapes, else the bunny's seeds
+BVH_GROWTH_FACES = 5  # the BVH row keeps the shapes whose full mesh has at least 5x its smallest LOD's triangles
+
+
+@dataclass(frozen=True)
+class Frames:
+    """The render records a claim reads: the first of RENDER_EXPERIMENTS with ok records, at its largest image.
+    Over several shapes a ratio is inferred over shapes (per-shape means over seeds); on one shape over its seeds
+    (one pair per fit)."""
+
+    experiment: str
+    width: int
+    records: list[dict[str, Any]]
+
+    @property
+    def shapes(self) -> list[str]:
+        return sorted({shape_name(r) for r in self.records})
+
+    @property
+    def where(self) -> str:
+        shapes = self.shapes
+        what = (f"{len(shapes)} evaluation shapes, per-shape means over seeds, then over the shapes" if len(shapes) > 1
+                else f"the {shapes[0] if shapes else '?'}, paired by seed")
+        return f"`{self.experiment}`: {what}, at {self.width}²"
+
+    @property
+    def gpu(self) -> bool:
+        return any(str((r.get("env") or {}).get("device", "")).startswith("cuda") for r in self.records)
+
+    def ratio(self, a: str, b: str, metric: str, metric_b: str | None = None,
+              shapes: set[str] | None = None) -> across_shapes.OverShapes:
+        """model a's `metric` / model b's `metric_b` (default the same metric): over shapes, or over paired seeds."""
+        keep = lambda m: lambda r: r.get("model") == m and (shapes is None or shape_name(r) in shapes)  # noqa: E731
+        pick = lambda m, x: paired.values(self.records, x, keep(m), paired.seed_key)  # noqa: E731
+        if len(self.shapes) > 1:
+            means = lambda m, x: shape_means((key[0], v) for key, v in pick(m, x).items())  # noqa: E731
+            return across_shapes.ratio(means(a, metric), means(b, metric_b or metric))
+        s = paired.log_ratio(pick(a, metric), pick(b, metric_b or metric))
+        return across_shapes.OverShapes(math.exp(s.mean), math.exp(s.lo), math.exp(s.hi), s.n) if s.n else \
+            across_shapes.OverShapes(math.nan, math.nan, math.nan, 0)
+
+    def values(self, model: str, metric: str) -> list[float]:
+        """The model's `metric`: one per-shape mean over seeds a shape, or on one shape one value a seed."""
+        v = paired.values(self.records, metric, lambda r: r.get("model") == model, paired.seed_key)
+        return list(shape_means((key[0], x) for key, x in v.items()).values()) if len(self.shapes) > 1 else \
+            list(v.values())
+
+    def fmt(self, r: across_shapes.OverShapes) -> str:
+        return _over_shapes(r, "shapes" if len(self.shapes) > 1 else "pairs")
+
+
+def frames(records: Records) -> Frames | None:
+    """The render records the render claims read (None: no experiment of RENDER_EXPERIMENTS has ok records)."""
+    for experiment in RENDER_EXPERIMENTS:
+        if ok_records(records.get(experiment) or []):
+            return Frames(experiment, *at_largest_image(records[experiment]))
+    return None
+
+
+def _side_of_one(r: across_shapes.OverShapes, above: bool) -> str:
+    """Verdict of "the ratio exceeds 1" (above) or "is below 1" from its interval."""
+    if r.n < 2 or not math.isfinite(r.lo):
+        return NOT_SEPARABLE
+    if r.lo > 1 or r.hi < 1:
+        return CONFIRMED if (r.lo > 1) == above else REFUTED
+    return NOT_SEPARABLE
+
+
 def renders_faster(records: Records) -> list[Claim]:
     """Fig. 5 / conclusion: DDFs render faster than SDFs and triangle meshes."""
-    src, recs = "DDF Fig. 5, §VII", records.get("render_time") or []
+    src, f = "DDF Fig. 5, §VII", frames(records)
     paper = "DDF renders (depth, normals) faster than BVH meshes and SDFs, on an RTX 3090"
-    if not ok_records(recs):
+    if f is None:
         return [_missing("DDF renders faster than SDF and mesh", src, paper, "render_time")]
-    width, largest = at_largest_image(recs)
-    pick = lambda m: paired.values(largest, "render_warm_s", lambda r: r.get("model") == m,  # noqa: E731
-                                   paired.seed_key)
-    ratios = {other: paired.log_ratio(pick(DDF), pick(other)) for other in (SDF, "mesh")}
-    gpu = any(str((r.get("env") or {}).get("device", "")).startswith("cuda") for r in largest)
-    # the claim is about rendering on a GPU; records say where they rendered
     out = []
-    for other, r in ratios.items():
-        verdict = below(r, 0.0) if gpu else NOT_TESTABLE
-        out.append(Claim(f"DDF renders faster than {other}", src, paper, f"warm render time ratio {DDF}/{other} {_ratio(r)}",
-                         f"`render_time`: the bunny at {width}², paired by seed", verdict,
-                         ("" if gpu else "The claim is about a GPU; these records are CPU runs (needs "
+    for other in (SDF, "mesh"):
+        r = f.ratio(DDF, other, "render_warm_s")
+        # the claim is about rendering on a GPU; records say where they rendered
+        out.append(Claim(f"DDF renders faster than {other}", src, paper, f"warm frame time ratio {DDF}/{other} "
+                         f"{f.fmt(r)}", f.where, _side_of_one(r, above=False) if f.gpu else NOT_TESTABLE,
+                         ("" if f.gpu else "The claim is about a GPU; these records are CPU runs (needs "
                           "`train.device=cuda` on a GPU), the CPU ratio is shown for reference. ")
-                         + "Default settings: the families' depth errors differ (render_time table, depth MAE)."))
-    return out + renders_faster_matched(records, gpu)
+                         + "Default settings: the families' depth errors differ (the report's depth MAE)."))
+    return out + renders_faster_matched(records, f.gpu)
 
 
 def renders_faster_matched(records: Records, gpu: bool) -> list[Claim]:
@@ -363,17 +426,9 @@ def renders_faster_matched(records: Records, gpu: bool) -> list[Claim]:
                   "family's fastest tracer setting / LOD whose depth error is at most the DDF's.")]
 
 
-def _above_one(r: Summary) -> str:
-    """Verdict of "the ratio exceeds 1" from the interval of its mean log."""
-    if r.n < 2 or not math.isfinite(r.lo):
-        return NOT_SEPARABLE
-    return CONFIRMED if r.lo > 0 else REFUTED if r.hi < 0 else NOT_SEPARABLE
-
-
 def render_costs(records: Records) -> list[Claim]:
     """Fig. 5's slower first frame, §I's constant-time query against a BVH's growing one, and §IV-B's normals from
-    autograd, from render_time's records (one shape: pairs are (seed, image size))."""
-    recs = records.get("render_time") or []
+    autograd, from the render records (frames(): over the evaluation shapes, else the bunny's seeds)."""
     cold_paper = ("rendering took more time the first time around (data copied to the GPU and cached); after that the "
                   "render time decreases")
     bvh_paper = ("a DDF takes constant time to find the nearest ray-triangle intersection; a BVH reduces the search to "
@@ -382,42 +437,41 @@ def render_costs(records: Records) -> list[Claim]:
     names = ("DDF's first frame slower than its warm frames", "a BVH's frame time grows with the triangle count",
              "DDF normals from autograd as accurate as the neural SDF's")
     sources = ("DDF Fig. 5", "DDF §I, Fig. 5", "DDF §III, §IV-B, Eq. 3")
-    if not ok_records(recs):
+    f = frames(records)
+    if f is None:
         return [_missing(n, src, p, "render_time") for n, src, p in zip(names, sources,
                                                                          (cold_paper, bvh_paper, normal_paper))]
-    width, largest = at_largest_image(recs)
-    pick = lambda m, metric: paired.values(largest, metric, lambda r: r.get("model") == m,  # noqa: E731
-                                           paired.seed_key)  # one pair per fitted model: the largest image
-    gpu = any(str((r.get("env") or {}).get("device", "")).startswith("cuda") for r in largest)
-    cold = paired.log_ratio(pick(DDF, "render_cold_s"), pick(DDF, "render_warm_s"))
-    faces = {str(r.get("model")): int((r.get("fit") or {}).get("faces") or (r.get("shape") or {}).get("n_faces") or 0)
-             for r in largest if r.get("family") == "mesh"}
-    small = min((m for m in faces if m != "mesh"), key=lambda m: faces[m], default=None)  # the fewest triangles
-    bvh = paired.log_ratio(pick("mesh", "render_warm_s"), pick(small, "render_warm_s")) if small else \
-        summarize_values([])
-    normals = paired.log_ratio(pick(DDF, "normal_angle_deg"), pick(SDF, "normal_angle_deg"))
-    angle = lambda m: summarize_values(pick(m, "normal_angle_deg").values())  # noqa: E731
-    where = f"`render_time`: the bunny at {width}², paired by seed"
+    cold = f.ratio(DDF, DDF, "render_cold_s", "render_warm_s")
+    faces = {(shape_name(r), str(r.get("model"))): int((r.get("fit") or {}).get("faces")
+                                                        or (r.get("shape") or {}).get("n_faces") or 0)
+             for r in f.records if r.get("family") == "mesh"}
+    lods = {m for _, m in faces if m != "mesh"}
+    small = min(lods, key=lambda m: max(n for (_, x), n in faces.items() if x == m), default=None)  # fewest triangles
+    grown = {s for (s, m), n in faces.items() if m == "mesh" and n >= BVH_GROWTH_FACES * faces.get((s, small), n)}
+    bvh = f.ratio("mesh", small, "render_warm_s", shapes=grown) if small and grown else \
+        across_shapes.OverShapes(math.nan, math.nan, math.nan, 0)
+    counts = ", ".join(f"{s} {faces[(s, 'mesh')]:,}/{faces.get((s, small), 0):,}" for s in sorted(grown))
+    normals = f.ratio(DDF, SDF, "normal_angle_deg")
+    angle = lambda m: summarize_values(f.values(m, "normal_angle_deg"))  # noqa: E731
+    unit = "shapes" if len(f.shapes) > 1 else "seeds"
     return [
-        Claim(names[0], sources[0], cold_paper, f"cold / warm frame time of {DDF} {_ratio(cold)}", where,
-              _above_one(cold) if gpu else NOT_TESTABLE,
-              ("" if gpu else "The paper's cause is the copy to the GPU; these are CPU records (needs "
+        Claim(names[0], sources[0], cold_paper, f"cold / warm frame time of {DDF} {f.fmt(cold)}", f.where,
+              _side_of_one(cold, above=True) if f.gpu else NOT_TESTABLE,
+              ("" if f.gpu else "The paper's cause is the copy to the GPU; these are CPU records (needs "
                "`train.device=cuda`), the CPU ratio is shown for reference. ") + "Cold: the first frame after loading "
               "the model; warm: the median of the repeats after one warm-up frame."),
         Claim(names[1], sources[1], bvh_paper,
-              f"warm frame time mesh ({faces.get('mesh', 0):,} faces) / {small} ({faces.get(small, 0):,} faces) "
-              f"{_ratio(bvh)}; a DDF's query is one network evaluation whatever the triangle count", where,
-              _above_one(bvh), "Embree's BVH on the CPU. The DDF half holds by construction (its cost is its "
-              "network's, fixed by the preset); the row tests the BVH half. One shape."),
+              f"warm frame time mesh / {small} {f.fmt(bvh)} (faces, full/LOD: {counts or '–'}); a DDF's query is one "
+              "network evaluation whatever the triangle count", f.where, _side_of_one(bvh, above=True),
+              f"Embree's BVH on the CPU, on the shapes whose full mesh has at least {BVH_GROWTH_FACES}× the LOD's "
+              "triangles. The DDF half holds by construction (its cost is its network's, fixed by the preset); the "
+              "row tests the BVH half."),
         Claim(names[2], sources[2], normal_paper,
               f"normal error ° {DDF} {_interval(angle(DDF), 1.0, 'normal_angle_deg')}, "
-              f"{SDF} {_interval(angle(SDF), 1.0, 'normal_angle_deg')}; "
-              f"ratio {_ratio(normals)}", where, _as_accurate(across_shapes.OverShapes(
-                  math.exp(normals.mean), math.exp(normals.lo), math.exp(normals.hi), normals.n)) if normals.n else
-              NOT_SEPARABLE,
+              f"{SDF} {_interval(angle(SDF), 1.0, 'normal_angle_deg')} (over {unit}); ratio {f.fmt(normals)}", f.where,
+              _as_accurate(normals),
               f"Mean angle between rendered and true normals over the pixels both hit; 'as accurate' = the angle "
-              f"ratio's interval at most {EQUIVALENCE}. The SDF's normal is its gradient. One shape: pairs are seeds, not "
-              "shapes."),
+              f"ratio's interval at most {EQUIVALENCE}. The SDF's normal is its gradient."),
     ]
 
 

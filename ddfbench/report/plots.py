@@ -10,6 +10,8 @@ no data for it; failed records are left out of every plot, the tables flag them)
   sampling     chamfer L2 against the number of training labels, one line per strategy (log-log)
   render_time  cold and warm render time per model and image size (bars, log axis; runs of the same
                model and size are averaged)
+  frames_by_shape  warm frame time per shape (groups) and model (bars), log axis, the mean over seeds
+               with its std; a shape's face count under its name
   ablation     chamfer L2 against each surface-sampling density (s_fc, s_dr, s_p), the others at
                their base (lowest) level: one line per factor
 Which kinds an experiment gets: PLOTS_BY_EXPERIMENT (by the runs' experiment file, +experiment=NAME), else
@@ -49,6 +51,7 @@ PLOTS_BY_EXPERIMENT: dict[str, tuple[str, ...]] = {
     "paper_ddf": ("convergence", "fit_curves"),
     "gan_epochs": ("convergence", "fit_curves"),
     "render_matched": ("render_time",),
+    "render_shapes": ("frames_by_shape", "pareto"),
     "tune": ("fit_curves",),  # plus reports/tune/tune.png by ddfbench.report.tune
     "shape_suite": ("fit_curves",),  # plus by_axis.png by ddfbench.report.shape_suite
     "tune_finalists": ("fit_curves",),
@@ -265,6 +268,36 @@ def plot_render_time(records: list[dict[str, Any]], out_dir: str) -> list[str]:
     return _save(fig, out_dir, "render_time")
 
 
+def plot_frames_by_shape(records: list[dict[str, Any]], out_dir: str) -> list[str]:
+    """Warm frame time per shape (groups, sorted by the mesh's face count) and model (bars), log axis; error bars:
+    std over seeds."""
+    times: dict[tuple[str, str], list[float]] = defaultdict(list)
+    faces: dict[str, int] = {}
+    for r in ok_records(records):
+        warm = as_float((r.get("cost") or {}).get("render_warm_s"))
+        if math.isfinite(warm):
+            times[(shape_name(r), str(r.get("model")))].append(warm)
+        if r.get("model") == "mesh":
+            faces[shape_name(r)] = int((r.get("fit") or {}).get("faces") or 0)
+    if not times:
+        return []
+    shapes = sorted({s for s, _ in times}, key=lambda s: (faces.get(s, 0), s))
+    models = sorted({m for _, m in times})
+    colors, bar_w = _colors(models), 0.8 / len(models)
+    fig, ax = plt.subplots(figsize=(max(7, 0.9 * len(shapes) * len(models) ** 0.5), 4.5))
+    for k, model in enumerate(models):
+        stats = [_mean_std(times.get((s, model), [])) for s in shapes]
+        ax.bar(np.arange(len(shapes)) - 0.4 + bar_w * (k + 0.5), [m for m, _ in stats], width=bar_w,
+               yerr=[e for _, e in stats], color=colors[model], edgecolor="k", lw=0.3, label=model)
+    ax.set_xticks(np.arange(len(shapes)), [f"{s}\n{faces[s]:,} faces" if s in faces else s for s in shapes],
+                  rotation=30, ha="right", fontsize=7)
+    ax.set(yscale="log", ylabel="warm frame time (s)", title="warm frame (median of repeats) by shape: mean ± std "
+           "over seeds")
+    ax.grid(True, axis="y", which="both", alpha=0.3)
+    ax.legend(fontsize=7, ncol=min(3, len(models)))
+    return _save(fig, out_dir, "frames_by_shape")
+
+
 def ablation_lines(records: list[dict[str, Any]]) -> dict[str, list[tuple[int, float, float]]]:
     """Per factor of (s_fc, s_dr, s_p): [(level, mean chamfer L2, std)] over the ok surface runs whose
     other two factors sit at their base (lowest) level, by increasing level; {} without surface runs."""
@@ -327,7 +360,7 @@ def plot_convergence(records: list[dict[str, Any]], out_dir: str) -> list[str]:
 
 PLOTS: dict[str, Callable[[list[dict[str, Any]], str], list[str]]] = {
     "fit_curves": plot_fit_curves, "pareto": plot_pareto, "sampling": plot_sampling,
-    "render_time": plot_render_time, "ablation": plot_ablation, "convergence": plot_convergence,
+    "render_time": plot_render_time, "frames_by_shape": plot_frames_by_shape, "ablation": plot_ablation, "convergence": plot_convergence,
 }
 
 

@@ -10,7 +10,7 @@ the state of the machine that ran the sweep). CI runs --check.
 Without --from-records:
 
 Regenerates the committed reports: for each experiment (default: tune, ablation, sampling, representations,
-storage, render_time, render_matched, pareto, convergence, paper_ddf) runs `python -m ddfbench +experiment=<e> out_dir=<results> [OVERRIDE ...]`
+storage, render_time, render_shapes, render_matched, pareto, convergence, paper_ddf) runs `python -m ddfbench +experiment=<e> out_dir=<results> [OVERRIDE ...]`
 (tune: once per model that declares a search space, report by ddfbench.report.tune)
 (finished runs are skipped, so an interrupted regeneration resumes), then writes
 `python -m ddfbench.report <results>/<e> --out <reports>/<e>` (render_matched: `python -m
@@ -41,8 +41,8 @@ from ddfbench.report import tune as tune_report
 from ddfbench.report.__main__ import OPTIONS_FILE, STATUS_FILE, MixedCommits, write_report
 from ddfbench.report.claims import write_claims, write_committed_claims
 
-EXPERIMENTS = ("tune", "ablation", "sampling", "representations", "storage", "render_time", "render_matched", "pareto",
-               "convergence", "paper_ddf")
+EXPERIMENTS = ("tune", "ablation", "sampling", "representations", "storage", "render_time", "render_shapes",
+               "render_matched", "pareto", "convergence", "paper_ddf")
 
 
 def sweep_commands(experiment: str, results: str, overrides: list[str]) -> list[list[str]]:
