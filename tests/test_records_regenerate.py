@@ -171,3 +171,19 @@ def test_the_verdict_s_own_rows_take_their_frames_from_render_time_s_largest_ima
         r["config"]["model"]["lr"] = 2 * r["config"]["model"]["lr"]
     rows = {(r[0], r[1].split(":")[0]): r for r in verdict.rows(short, short, frames)}
     assert rows[("ddf_tuned", "own")][header] == "–"
+
+
+def test_the_verdict_adds_a_same_grid_row_only_for_a_preset_the_shape_suite_lacks():
+    import copy
+
+    from ddfbench.report import verdict
+
+    short = compact.read_compact(os.path.join(ROOT, "reports", "default", compact.FILE))
+    grid = []
+    for model in ("ddf_tuned", "neural_sdf_grid"):  # ddf_tuned is in the shape suite: its own row stands
+        for r in copy.deepcopy([r for r in short if r["model"] == "ddf_tuned"]):
+            r["model"], r["fit"]["steps"] = model, 3000
+            grid.append(r)
+    rows = [r[:2] for r in verdict.rows(short, short, [], grid)]
+    assert ["neural_sdf_grid", "same grid: 3,000 steps"] in rows
+    assert not [r for r in rows if r[0] == "ddf_tuned" and r[1].startswith("same grid")]

@@ -4,7 +4,9 @@ from committed records only, into reports/verdict.md and between the README's ve
 One row per preset and budget: the short budget is `reports/default` (each family's `first_look` level, about a
 minute on 2 cores, with renders), the preset's own budget is `reports/shape_suite` (its fit_steps) on the bunny,
 beside its geometric mean over the suite's evaluation shapes, with the frame columns from `reports/render_time` (the
-same preset at the same fit_steps, its largest images). Per row: CD-L2 as a multiple of the noise floor (the
+same preset at the same fit_steps, its largest images; `reports/render_shapes` for a preset render_time lacks). The
+presets the shape suite lacks (the feature-grid DDF and SDF) get their row from `reports/grid_encodings` (equal
+steps for every family), beside its geometric mean over that report's shapes. Per row: CD-L2 as a multiple of the noise floor (the
 mesh against a resample of itself at the same point count) with the 95 % t interval over seeds, the point-to-surface
 chamfer, F@0.005, depth MAE and mask IoU where the run rendered, fit or build seconds, warm frame seconds, bytes. A
 preset with a run that gave no mesh or one off the shape says "not converged" and is not ranked. The footnote names
@@ -30,7 +32,7 @@ from ddfbench.report.stats import summarize_values
 from ddfbench.report.tables import pipe_table
 
 START, END = "<!-- verdict:start (python -m ddfbench.report.verdict) -->", "<!-- verdict:end -->"
-SHORT, FULL, FRAMES = "default", "shape_suite", "render_time"
+SHORT, FULL, FRAMES, OTHER_FRAMES, GRID = "default", "shape_suite", "render_time", "render_shapes", "grid_encodings"
 SHAPE = "bunny"
 FAMILY_ORDER = ["mesh", "grid_sdf", "neural_sdf", "ddf", "gan_sdf"]  # the reference first, then the fields
 HEADER = ["preset", "budget", "CD-L2 / floor, geometric mean [95 %]", "p2s CD-L2 ×10³", "F@0.005", "depth MAE ×10³ / mask IoU",
@@ -78,16 +80,20 @@ def largest_frames(frames: list[Record], like: list[Record]) -> list[Record]:
                             and same_preset(r, like[0]) and (r.get("fit") or {}).get("steps") in steps)[1]
 
 
-def rows(short: list[Record], full: list[Record], frames: list[Record] = ()) -> list[list[str]]:
-    """The table's rows: per model of either record set, its short-budget row then its own-budget row (whose frame
-    columns come from render_time's largest images of the same preset at the same fit_steps)."""
-    over_shapes = cells(full, "chamfer_l2")
-    family = {str(r.get("model")): str(r.get("family")) for r in ok_records(short + full)}
+def rows(short: list[Record], full: list[Record], frames: list[Record] = (),
+         grid: list[Record] = ()) -> list[list[str]]:
+    """The table's rows: per model of the record sets, its short-budget row, its own-budget row (whose frame columns
+    come from the largest images of the same preset at the same fit_steps in `frames`), and for a model the shape
+    suite lacks its row from `grid` (grid_encodings: equal steps for every family)."""
+    grid = [r for r in grid if r.get("model") not in {x.get("model") for x in full}]
+    budgets = ((short, "short"), (full, "own"), (grid, "same grid"))
+    over_shapes = {label: cells(recs, "chamfer_l2") for recs, label in budgets[1:]}
+    family = {str(r.get("model")): str(r.get("family")) for r in ok_records([*short, *full, *grid])}
     models = sorted(family, key=lambda m: (FAMILY_ORDER.index(family[m]) if family[m] in FAMILY_ORDER
                                            else len(FAMILY_ORDER), m))
     out = []
     for model in models:
-        for recs, label in ((short, "short"), (full, "own")):
+        for recs, label in budgets:
             mine = [r for r in ok_records(recs) if r.get("model") == model and shape_name(r) == SHAPE]
             if not mine:
                 continue
@@ -99,9 +105,9 @@ def rows(short: list[Record], full: list[Record], frames: list[Record] = ()) -> 
                            + ["–"] * (len(HEADER) - 3))
                 continue
             suite = "–"
-            if label == "own" and model in over_shapes:
-                suite = fmt(geometric(over_shapes[model]), 1e3)
-                missed = sum(1 for row in not_converged(full) if row["model"] == model)
+            if model in over_shapes.get(label, {}):
+                suite = fmt(geometric(over_shapes[label][model]), 1e3)
+                missed = sum(1 for row in not_converged(recs) if row["model"] == model)
                 suite += f"; not converged on {missed} shape{'s' if missed > 1 else ''}" if missed else ""
             rendered = mine if label == "short" else largest_frames(list(frames), mine)
             image = (f"{_mean(rendered, 'depth_mae', 1e3)} / {_mean(rendered, 'mask_iou', 1.0, '.3f')}"
@@ -131,15 +137,24 @@ def footnote(sets: dict[str, list[Record]]) -> str:
             "short: each family's `first_look` level of the default run, its frames at 64²; own: the preset's "
             "fit_steps in the shape suite, whose last column is the geometric mean over its evaluation shapes, "
             "per-axis in `reports/shape_suite/report.md`, and its image columns from `reports/render_time`'s "
-            "largest frames, the same preset at the same steps). " + "; ".join(parts) + ".")
+            "largest frames (or `reports/render_shapes`' for a preset render_time lacks), the same preset at the "
+            "same steps; same grid: `reports/grid_encodings`, every family at 3,000 steps, for the presets the shape "
+            "suite lacks, its last column over that report's shapes). " + "; ".join(parts) + ".")
+
+
+def frame_records(sets: dict[str, list[Record]]) -> list[Record]:
+    """render_time's records, and render_shapes' of the models render_time has none of (one experiment a model)."""
+    timed = {r.get("model") for r in sets[FRAMES]}
+    return sets[FRAMES] + [r for r in sets[OTHER_FRAMES] if r.get("model") not in timed]
 
 
 def table(reports: str) -> str:
     sets = {}
-    for name in (SHORT, FULL, FRAMES):
+    for name in (SHORT, FULL, FRAMES, OTHER_FRAMES, GRID):
         path = os.path.join(reports, name, compact.FILE)
         sets[name] = compact.read_compact(path) if os.path.isfile(path) else []
-    return pipe_table(HEADER, rows(sets[SHORT], sets[FULL], sets[FRAMES])) + "\n" + footnote(sets) + "\n"
+    return pipe_table(HEADER, rows(sets[SHORT], sets[FULL], frame_records(sets), sets[GRID])) + "\n" \
+        + footnote(sets) + "\n"
 
 
 def with_block(readme: str, block: str) -> str:
