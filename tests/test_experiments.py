@@ -54,7 +54,6 @@ LARGE = pytest.mark.slow  # composing a job's config takes ~0.2 s: grids of 80+ 
     pytest.param("storage", lambda: 4 * n_members("model", "storage") * 3, marks=LARGE),
     pytest.param("pareto", lambda: 4 * n_members("model", "pareto") * 3, marks=LARGE),
     pytest.param("render_time", lambda: 3 * n_members("model", "render_time") * 3, marks=LARGE),  # 3 image sizes
-    pytest.param("render_shapes", lambda: 12 * n_members("model", "render_shapes") * 3, marks=LARGE),
     ("smoke", lambda: n_members("model", "smoke") * n_members("sampling", "smoke"))])
 def test_experiment_expands_to_its_documented_grid(experiment, n_jobs, tmp_path):
     jobs = grid(experiment)

@@ -79,8 +79,9 @@ def test_the_split_is_disjoint_covers_the_minimums_and_every_shape_is_in_the_cat
     assert all(s.provenance and s.license for s in suite.SUITE_V1)
 
 
-def test_the_experiment_sweeps_exactly_the_evaluation_split():
-    with open(f"{CONF_DIR}/experiment/shape_suite.yaml") as f:
+@pytest.mark.parametrize("experiment", ["shape_suite", "render_shapes"])
+def test_the_experiment_sweeps_exactly_the_evaluation_split(experiment):
+    with open(f"{CONF_DIR}/experiment/{experiment}.yaml") as f:
         swept = yaml.safe_load(f)["hydra"]["sweeper"]["params"]["shape"].split(",")
     assert swept == suite.split("evaluation")
     assert all(os.path.exists(f"{CONF_DIR}/shape/{name}.yaml") for name in swept)
