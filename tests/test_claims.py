@@ -1,7 +1,11 @@
 """reports/claims.md from a small set of synthetic records: every listed claim has a row, and a
 verdict follows the numbers (flip the numbers, the verdict flips)."""
 
+import re
+
+import numpy as np
 import pytest
+import scipy.stats
 
 from ddfbench.report import claims
 from ddfbench.report.__main__ import main as report_main
@@ -114,40 +118,67 @@ def test_the_bvh_row_names_the_triangle_counts_and_compares_the_full_mesh_with_i
     assert row.verdict == claims.CONFIRMED
 
 
-def render_shapes(ddf_over_sdf, shapes=("bunny", "cup", "chain", "box")):
-    """render_time's families on several shapes, the DDF's warm frame ddf_over_sdf[i] x the SDF's on shape i (seeds
-    jittered), the full mesh with the shape's face count (the box's 12 are under its 2,000-face LOD's 5x)."""
-    faces = {"bunny": 56172, "cup": 1020, "chain": 12288, "box": 12}
+FACES = {"bunny": 56172, "cup": 1020, "chain": 12288, "box": 12}
+
+
+def render_shapes(ddf_over_sdf, bvh=(3.0, 1.0, 2.0, 1.0), device="cpu"):
+    """render_time's families on the FACES shapes: on shape i the DDF's warm frame ddf_over_sdf[i] x the SDF's, its
+    cold frame (2 + i/2) x its warm one, the full mesh bvh[i] x slower than its LOD, which keeps min(2,000, faces)."""
     out = []
-    for shape, ratio in zip(shapes, ddf_over_sdf):
-        for r in render_time("cpu"):
+    for i, (shape, ratio, growth) in enumerate(zip(FACES, ddf_over_sdf, bvh)):
+        for r in render_time(device, bvh_growth=growth):
             r = {**r, "experiment": "render_shapes", "shape": {"name": shape}, "scene": {"width": 128},
-                 "key": r["key"] + shape, "cost": dict(r["cost"])}
+                 "key": r["key"] + shape, "cost": dict(r["cost"]), "config": {**r["config"], "model": {}}}
             if r["model"] == claims.DDF:
                 r["cost"]["render_warm_s"] *= ratio * 0.6 / 0.08
+                r["cost"]["render_cold_s"] = (2 + i / 2) * r["cost"]["render_warm_s"]
             if r["model"] == "mesh":
-                r["fit"] = {"faces": faces[shape]}
+                r["fit"] = {"faces": FACES[shape]}
+            if r["model"] == "mesh_lod2000":
+                r["fit"], r["config"]["model"] = {"faces": min(2000, FACES[shape])}, {"faces": 2000}
             out.append(r)
     return out
 
 
+def t_interval(values):
+    """exp of the mean log and of its 95 % t interval: the claims' ratio over shapes, computed here by hand."""
+    logs = np.log(values)
+    half = scipy.stats.t.ppf(0.975, len(logs) - 1) * logs.std(ddof=1) / np.sqrt(len(logs))
+    return np.exp(logs.mean()), np.exp(logs.mean() - half), np.exp(logs.mean() + half)
+
+
+def numbers(text, after):
+    """The ratio and its interval bounds written after `after`: '1.23× [0.9, 1.5]'."""
+    m = re.search(re.escape(after) + r" ([\d.e+-]+)× \[([\d.e+-]+), ([\d.e+-]+)\]", text)
+    return tuple(float(x) for x in m.groups())
+
+
 def test_render_ratios_over_shapes_take_the_interval_over_shapes_not_seeds():
-    recs = records(render_shapes=render_shapes((0.2, 0.3, 0.25, 0.4)))
-    rows = {c.claim: c for c in claims.evaluate(recs)}
+    rows = {c.claim: c for c in claims.evaluate(records(render_shapes=render_shapes((0.2, 0.3, 0.25, 0.4))))}
     faster = rows[f"DDF renders faster than {claims.SDF}"]
     assert "(n=4 shapes)" in faster.measured and "`render_shapes`: 4 evaluation shapes" in faster.rows
-    center = float(faster.measured.split(f"{claims.SDF} ")[1].split("×")[0])
-    assert center == pytest.approx((0.2 * 0.3 * 0.25 * 0.4) ** 0.25, rel=1e-2)  # the geometric mean over shapes
+    assert numbers(faster.measured, f"{claims.SDF}") == pytest.approx(t_interval([0.2, 0.3, 0.25, 0.4]), rel=6e-3)
+    cold = rows["DDF's first frame slower than its warm frames"]
+    assert numbers(cold.measured, claims.DDF) == pytest.approx(t_interval([2, 2.5, 3, 3.5]), rel=6e-3)
     bvh = rows["a BVH's frame time grows with the triangle count"]
-    # the box (12 faces) and the cup (1,020) have no more triangles than the LOD's 2,000 x 5: left out
+    # the box (12 faces) and the cup (1,020) have fewer than 5 x the LOD's triangles: left out, and named nowhere
     assert "(n=2 shapes)" in bvh.measured and "bunny 56,172/2,000, chain 12,288/2,000" in bvh.measured
+    assert numbers(bvh.measured, "mesh_lod2000") == pytest.approx(t_interval([3.0, 2.0]), rel=6e-3)
+    assert "2 evaluation shapes" in bvh.rows
 
 
-def test_render_claims_prefer_the_records_over_shapes_to_the_bunny_alone():
-    slow = records(render_time=render_time("cuda"), render_shapes=[
-        {**r, "env": {**r["env"], "device": "cuda"}} for r in render_shapes((2.0, 3.0, 2.5, 4.0))])
+def test_render_claims_prefer_records_over_shapes_that_hold_the_claim_s_models_and_a_gpu_for_a_gpu_claim():
+    slow = records(render_time=render_time("cuda"), render_shapes=render_shapes((2.0, 3.0, 2.5, 4.0), device="cuda"))
     assert verdicts(slow)[f"DDF renders faster than {claims.SDF}"] == claims.REFUTED  # the bunny alone: confirmed
     assert verdicts(records(render_time=render_time("cuda")))[f"DDF renders faster than {claims.SDF}"] == claims.CONFIRMED
+    # over shapes but on the CPU: the GPU claim reads the bunny's CUDA records
+    cpu_shapes = records(render_time=render_time("cuda"), render_shapes=render_shapes((2.0, 3.0, 2.5, 4.0)))
+    assert verdicts(cpu_shapes)[f"DDF renders faster than {claims.SDF}"] == claims.CONFIRMED
+    # a sweep over shapes without the DDF: its claims fall back to the bunny's records
+    no_ddf = [r for r in render_shapes((2.0, 3.0, 2.5, 4.0)) if r["model"] != claims.DDF]
+    rows = {c.claim: c for c in claims.evaluate(records(render_shapes=no_ddf))}
+    assert rows[f"DDF renders faster than {claims.SDF}"].rows.startswith("`render_time`")
+    assert rows["a BVH's frame time grows with the triangle count"].rows.startswith("`render_shapes`")
 
 
 @pytest.mark.parametrize("change,claim,before,after", [
@@ -223,19 +254,34 @@ def render_matched(loose_warm_s, device="cuda"):
     return out
 
 
-def test_matched_depth_error_row_follows_the_loosened_tracer():
-    times = [r for r in render_time("cuda") if r["model"] != "mesh_lod2000"]
+def matched_times(device="cuda"):
+    """render_time's records with depth errors: the DDF 0.02, the SDF 0.001 (tracer at its default), the mesh 0 and
+    slower than the DDF (the matched verdict hangs on the neural SDF)."""
+    times = [r for r in render_time(device) if r["model"] != "mesh_lod2000"]
     for r in times:
         r["scene"]["height"] = 64
         r["metrics"]["depth_mae"] = {claims.DDF: 0.02, claims.SDF: 0.001, "mesh": 0.0}[r["model"]]
         if r["model"] == "mesh":
-            r["cost"]["render_warm_s"] = 0.5  # slower than the DDF here: the verdict hangs on the neural SDF
+            r["cost"]["render_warm_s"] = 0.5
+    return times
+
+
+def test_matched_depth_error_row_follows_the_loosened_tracer():
     claim = "DDF renders faster at matched depth error"
-    assert verdicts(records(render_time=times, render_matched=render_matched(0.05)))[claim] == claims.REFUTED
-    assert verdicts(records(render_time=times, render_matched=render_matched(0.2)))[claim] == claims.CONFIRMED
-    for r in times:
-        r["env"]["device"] = "cpu"
-    assert verdicts(records(render_time=times, render_matched=render_matched(0.2, "cpu")))[claim] == claims.NOT_TESTABLE
+    assert verdicts(records(render_time=matched_times(), render_matched=render_matched(0.05)))[claim] == claims.REFUTED
+    assert verdicts(records(render_time=matched_times(), render_matched=render_matched(0.2)))[claim] == claims.CONFIRMED
+    assert verdicts(records(render_time=matched_times("cpu"), render_matched=render_matched(0.2, "cpu")))[claim] == \
+        claims.NOT_TESTABLE
+
+
+def test_the_matched_render_claim_reads_the_device_of_its_own_records():
+    claim = "DDF renders faster at matched depth error"
+    cuda = records(render_time=matched_times(), render_matched=render_matched(0.2),
+                   render_shapes=render_shapes((0.2, 0.3, 0.25, 0.4)))  # CPU frames over shapes beside them
+    assert verdicts(cuda)[claim] == claims.CONFIRMED
+    cpu = records(render_time=matched_times("cpu"), render_matched=render_matched(0.2, "cpu"),
+                  render_shapes=render_shapes((0.2, 0.3, 0.25, 0.4), device="cuda"))
+    assert verdicts(cpu)[claim] == claims.NOT_TESTABLE
 
 
 def test_the_models_the_claims_compare_are_those_the_experiments_run():

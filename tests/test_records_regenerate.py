@@ -4,6 +4,7 @@ written from the run folders, and `regenerate --from-records --check` names a co
 import gzip
 import os
 import shutil
+import statistics
 
 import pytest
 
@@ -181,9 +182,19 @@ def test_the_verdict_adds_a_same_grid_row_only_for_a_preset_the_shape_suite_lack
     short = compact.read_compact(os.path.join(ROOT, "reports", "default", compact.FILE))
     grid = []
     for model in ("ddf_tuned", "neural_sdf_grid"):  # ddf_tuned is in the shape suite: its own row stands
-        for r in copy.deepcopy([r for r in short if r["model"] == "ddf_tuned"]):
-            r["model"], r["fit"]["steps"] = model, 3000
-            grid.append(r)
-    rows = [r[:2] for r in verdict.rows(short, short, [], grid)]
-    assert ["neural_sdf_grid", "same grid: 3,000 steps"] in rows
+        for shape, scale in (("bunny", 1.0), ("cup", 4.0)):
+            for r in copy.deepcopy([r for r in short if r["model"] == "ddf_tuned"]):
+                r["model"], r["fit"]["steps"], r["shape"]["name"] = model, 3000, shape
+                r["metrics"]["chamfer_l2"] *= scale
+                grid.append(r)
+    frames = copy.deepcopy([r for r in grid if r["model"] == "neural_sdf_grid" and r["shape"]["name"] == "bunny"])
+    for r in frames:
+        r["experiment"], r["scene"]["width"], r["cost"]["render_warm_s"] = "render_shapes", 128, 7.77
+    sets = {verdict.FRAMES: [{**r, "status": "failed"} for r in frames], verdict.OTHER_FRAMES: frames}
+    rows = {(r[0], r[1]): r for r in verdict.rows(short, short, verdict.frame_records(sets), grid)}
+    row = rows[("neural_sdf_grid", "same grid: 3,000 steps")]
+    assert row[verdict.HEADER.index("warm frame s")] == "7.77"  # render_shapes' frames: render_time's all failed
+    bunny = statistics.mean(r["metrics"]["chamfer_l2"] for r in grid if r["model"] == "neural_sdf_grid"
+                            and r["shape"]["name"] == "bunny")
+    assert row[-1].startswith(f"{bunny * 2 * 1e3:.3g} [") and row[-1].endswith("(n 2)")  # geometric mean of x1, x4
     assert not [r for r in rows if r[0] == "ddf_tuned" and r[1].startswith("same grid")]

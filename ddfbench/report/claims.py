@@ -315,14 +315,19 @@ def accurate_as_sdf_over_shapes(records: Records) -> list[Claim]:
 
 
 RENDER_EXPERIMENTS = ("render_shapes", "render_time")  # frame costs over the evaluation shapes, else the bunny's seeds
+RENDER_SOURCE = " or ".join(RENDER_EXPERIMENTS)
 BVH_GROWTH_FACES = 5  # the BVH row keeps the shapes whose full mesh has at least 5x its smallest LOD's triangles
+NO_RATIO = across_shapes.OverShapes(math.nan, math.nan, math.nan, 0)
+
+
+def _on_gpu(records: list[dict[str, Any]]) -> bool:
+    return any(str((r.get("env") or {}).get("device", "")).startswith("cuda") for r in records)
 
 
 @dataclass(frozen=True)
 class Frames:
-    """The render records a claim reads: the first of RENDER_EXPERIMENTS with ok records, at its largest image.
-    Over several shapes a ratio is inferred over shapes (per-shape means over seeds); on one shape over its seeds
-    (one pair per fit)."""
+    """The render records a claim reads (frames()), at their experiment's largest image. Over several shapes a ratio
+    is inferred over shapes (per-shape means over seeds); on one shape over its seeds (one pair per fit)."""
 
     experiment: str
     width: int
@@ -333,44 +338,62 @@ class Frames:
         return sorted({shape_name(r) for r in self.records})
 
     @property
-    def where(self) -> str:
-        shapes = self.shapes
-        what = (f"{len(shapes)} evaluation shapes, per-shape means over seeds, then over the shapes" if len(shapes) > 1
-                else f"the {shapes[0] if shapes else '?'}, paired by seed")
+    def over_shapes(self) -> bool:
+        return len(self.shapes) > 1
+
+    def where(self, shapes: set[str] | None = None) -> str:
+        """The rows cell: the experiment, the shapes a row's ratio is over (default all), the image size."""
+        names = sorted(shapes) if shapes is not None else self.shapes
+        what = (f"{len(names)} evaluation shapes, per-shape means over seeds, then over the shapes" if self.over_shapes
+                else f"the {names[0] if names else '?'}, paired by seed")
         return f"`{self.experiment}`: {what}, at {self.width}²"
 
     @property
     def gpu(self) -> bool:
-        return any(str((r.get("env") or {}).get("device", "")).startswith("cuda") for r in self.records)
+        return _on_gpu(self.records)
 
-    def ratio(self, a: str, b: str, metric: str, metric_b: str | None = None,
-              shapes: set[str] | None = None) -> across_shapes.OverShapes:
-        """model a's `metric` / model b's `metric_b` (default the same metric): over shapes, or over paired seeds."""
-        keep = lambda m: lambda r: r.get("model") == m and (shapes is None or shape_name(r) in shapes)  # noqa: E731
-        pick = lambda m, x: paired.values(self.records, x, keep(m), paired.seed_key)  # noqa: E731
-        if len(self.shapes) > 1:
-            means = lambda m, x: shape_means((key[0], v) for key, v in pick(m, x).items())  # noqa: E731
-            return across_shapes.ratio(means(a, metric), means(b, metric_b or metric))
-        s = paired.log_ratio(pick(a, metric), pick(b, metric_b or metric))
-        return across_shapes.OverShapes(math.exp(s.mean), math.exp(s.lo), math.exp(s.hi), s.n) if s.n else \
-            across_shapes.OverShapes(math.nan, math.nan, math.nan, 0)
+    def _pick(self, model: str, metric: str, shapes: set[str] | None = None) -> dict[tuple, float]:
+        keep = lambda r: r.get("model") == model and (shapes is None or shape_name(r) in shapes)  # noqa: E731
+        return paired.values(self.records, metric, keep, paired.seed_key)
+
+    def ratio(self, a: str, b: str, metric: str, shapes: set[str] | None = None) -> across_shapes.OverShapes:
+        """model a's `metric` / model b's: over shapes (the per-shape means' ratios), or over paired seeds."""
+        if self.over_shapes:
+            means = lambda m: shape_means((key[0], v) for key, v in self._pick(m, metric, shapes).items())  # noqa: E731
+            return across_shapes.ratio(means(a), means(b))
+        s = paired.log_ratio(self._pick(a, metric, shapes), self._pick(b, metric, shapes))
+        return across_shapes.OverShapes(math.exp(s.mean), math.exp(s.lo), math.exp(s.hi), s.n) if s.n else NO_RATIO
+
+    def within_run(self, model: str, metric: str, metric_b: str) -> across_shapes.OverShapes:
+        """Each run's `metric` / its `metric_b`: over shapes the geometric mean of the per-shape geometric means over
+        seeds, or on one shape over the runs."""
+        a, b = self._pick(model, metric), self._pick(model, metric_b)
+        logs = {k: math.log(a[k] / b[k]) for k in a if k in b and a[k] > 0 and b[k] > 0}
+        if self.over_shapes:
+            return across_shapes.geometric({s: math.exp(v) for s, v in shape_means(
+                (key[0], x) for key, x in logs.items()).items()})
+        s = summarize_values(logs.values())
+        return across_shapes.OverShapes(math.exp(s.mean), math.exp(s.lo), math.exp(s.hi), s.n) if s.n else NO_RATIO
 
     def values(self, model: str, metric: str) -> list[float]:
         """The model's `metric`: one per-shape mean over seeds a shape, or on one shape one value a seed."""
-        v = paired.values(self.records, metric, lambda r: r.get("model") == model, paired.seed_key)
-        return list(shape_means((key[0], x) for key, x in v.items()).values()) if len(self.shapes) > 1 else \
-            list(v.values())
+        v = self._pick(model, metric)
+        return list(shape_means((key[0], x) for key, x in v.items()).values()) if self.over_shapes else list(v.values())
 
     def fmt(self, r: across_shapes.OverShapes) -> str:
-        return _over_shapes(r, "shapes" if len(self.shapes) > 1 else "pairs")
+        return _over_shapes(r, "shapes" if self.over_shapes else "pairs")
 
 
-def frames(records: Records) -> Frames | None:
-    """The render records the render claims read (None: no experiment of RENDER_EXPERIMENTS has ok records)."""
+def frames(records: Records, models: tuple[str, ...], prefer_gpu: bool = False) -> Frames | None:
+    """The render records a claim about `models` reads: of RENDER_EXPERIMENTS (in order) the first whose largest
+    images hold ok records of every model; with prefer_gpu (a claim about a GPU) one rendered on CUDA first. None:
+    no experiment has them all."""
+    found = []
     for experiment in RENDER_EXPERIMENTS:
-        if ok_records(records.get(experiment) or []):
-            return Frames(experiment, *at_largest_image(records[experiment]))
-    return None
+        width, largest = at_largest_image(records.get(experiment) or [])
+        if all(any(r.get("model") == m for r in largest) for m in models):
+            found.append(Frames(experiment, width, largest))
+    return min(found, key=lambda f: prefer_gpu and not f.gpu, default=None)  # min keeps the first of equals
 
 
 def _side_of_one(r: across_shapes.OverShapes, above: bool) -> str:
@@ -384,27 +407,30 @@ def _side_of_one(r: across_shapes.OverShapes, above: bool) -> str:
 
 def renders_faster(records: Records) -> list[Claim]:
     """Fig. 5 / conclusion: DDFs render faster than SDFs and triangle meshes."""
-    src, f = "DDF Fig. 5, §VII", frames(records)
+    src = "DDF Fig. 5, §VII"
     paper = "DDF renders (depth, normals) faster than BVH meshes and SDFs, on an RTX 3090"
-    if f is None:
-        return [_missing("DDF renders faster than SDF and mesh", src, paper, "render_time")]
     out = []
     for other in (SDF, "mesh"):
+        f = frames(records, (DDF, other), prefer_gpu=True)
+        if f is None:
+            out.append(_missing(f"DDF renders faster than {other}", src, paper, RENDER_SOURCE))
+            continue
         r = f.ratio(DDF, other, "render_warm_s")
         # the claim is about rendering on a GPU; records say where they rendered
         out.append(Claim(f"DDF renders faster than {other}", src, paper, f"warm frame time ratio {DDF}/{other} "
-                         f"{f.fmt(r)}", f.where, _side_of_one(r, above=False) if f.gpu else NOT_TESTABLE,
+                         f"{f.fmt(r)}", f.where(), _side_of_one(r, above=False) if f.gpu else NOT_TESTABLE,
                          ("" if f.gpu else "The claim is about a GPU; these records are CPU runs (needs "
                           "`train.device=cuda` on a GPU), the CPU ratio is shown for reference. ")
                          + "Default settings: the families' depth errors differ (the report's depth MAE)."))
-    return out + renders_faster_matched(records, f.gpu)
+    return out + renders_faster_matched(records)
 
 
-def renders_faster_matched(records: Records, gpu: bool) -> list[Claim]:
+def renders_faster_matched(records: Records) -> list[Claim]:
     """The same claim with each family at its fastest setting as accurate in depth as the DDF."""
     src, paper = "DDF Fig. 5, §VII", "DDF renders faster than BVH meshes and SDFs, on an RTX 3090"
     if not ok_records(records.get("render_matched") or []):
         return [_missing("DDF faster at matched depth error", src, paper, "render_matched")]
+    gpu = _on_gpu(ok_records(records.get("render_time") or []) + ok_records(records["render_matched"]))
     table = matched.matched_table(ok_records(records.get("render_time") or []) + ok_records(records["render_matched"]))
     if table.empty:
         return [_missing("DDF faster at matched depth error", src, paper, "render_time")]
@@ -437,42 +463,57 @@ def render_costs(records: Records) -> list[Claim]:
     names = ("DDF's first frame slower than its warm frames", "a BVH's frame time grows with the triangle count",
              "DDF normals from autograd as accurate as the neural SDF's")
     sources = ("DDF Fig. 5", "DDF §I, Fig. 5", "DDF §III, §IV-B, Eq. 3")
-    f = frames(records)
+    out = []
+    f = frames(records, (DDF,), prefer_gpu=True)
     if f is None:
-        return [_missing(n, src, p, "render_time") for n, src, p in zip(names, sources,
-                                                                         (cold_paper, bvh_paper, normal_paper))]
-    cold = f.ratio(DDF, DDF, "render_cold_s", "render_warm_s")
-    faces = {(shape_name(r), str(r.get("model"))): int((r.get("fit") or {}).get("faces")
-                                                        or (r.get("shape") or {}).get("n_faces") or 0)
-             for r in f.records if r.get("family") == "mesh"}
-    lods = {m for _, m in faces if m != "mesh"}
-    small = min(lods, key=lambda m: max(n for (_, x), n in faces.items() if x == m), default=None)  # fewest triangles
-    grown = {s for (s, m), n in faces.items() if m == "mesh" and n >= BVH_GROWTH_FACES * faces.get((s, small), n)}
-    bvh = f.ratio("mesh", small, "render_warm_s", shapes=grown) if small and grown else \
-        across_shapes.OverShapes(math.nan, math.nan, math.nan, 0)
-    counts = ", ".join(f"{s} {faces[(s, 'mesh')]:,}/{faces.get((s, small), 0):,}" for s in sorted(grown))
+        out.append(_missing(names[0], sources[0], cold_paper, RENDER_SOURCE))
+    else:
+        cold = f.within_run(DDF, "render_cold_s", "render_warm_s")
+        out.append(Claim(names[0], sources[0], cold_paper, f"cold / warm frame time of {DDF} {f.fmt(cold)}", f.where(),
+                         _side_of_one(cold, above=True) if f.gpu else NOT_TESTABLE,
+                         ("" if f.gpu else "The paper's cause is the copy to the GPU; these are CPU records (needs "
+                          "`train.device=cuda`), the CPU ratio is shown for reference. ") + "Cold: the first frame "
+                         "after loading the model; warm: the median of the repeats after one warm-up frame; the ratio "
+                         "is each run's."))
+    out.append(bvh_growth(records, names[1], sources[1], bvh_paper))
+    f = frames(records, (DDF, SDF))
+    if f is None:
+        return out + [_missing(names[2], sources[2], normal_paper, RENDER_SOURCE)]
     normals = f.ratio(DDF, SDF, "normal_angle_deg")
     angle = lambda m: summarize_values(f.values(m, "normal_angle_deg"))  # noqa: E731
-    unit = "shapes" if len(f.shapes) > 1 else "seeds"
-    return [
-        Claim(names[0], sources[0], cold_paper, f"cold / warm frame time of {DDF} {f.fmt(cold)}", f.where,
-              _side_of_one(cold, above=True) if f.gpu else NOT_TESTABLE,
-              ("" if f.gpu else "The paper's cause is the copy to the GPU; these are CPU records (needs "
-               "`train.device=cuda`), the CPU ratio is shown for reference. ") + "Cold: the first frame after loading "
-              "the model; warm: the median of the repeats after one warm-up frame."),
-        Claim(names[1], sources[1], bvh_paper,
-              f"warm frame time mesh / {small} {f.fmt(bvh)} (faces, full/LOD: {counts or '–'}); a DDF's query is one "
-              "network evaluation whatever the triangle count", f.where, _side_of_one(bvh, above=True),
-              f"Embree's BVH on the CPU, on the shapes whose full mesh has at least {BVH_GROWTH_FACES}× the LOD's "
-              "triangles. The DDF half holds by construction (its cost is its network's, fixed by the preset); the "
-              "row tests the BVH half."),
-        Claim(names[2], sources[2], normal_paper,
-              f"normal error ° {DDF} {_interval(angle(DDF), 1.0, 'normal_angle_deg')}, "
-              f"{SDF} {_interval(angle(SDF), 1.0, 'normal_angle_deg')} (over {unit}); ratio {f.fmt(normals)}", f.where,
-              _as_accurate(normals),
-              f"Mean angle between rendered and true normals over the pixels both hit; 'as accurate' = the angle "
-              f"ratio's interval at most {EQUIVALENCE}. The SDF's normal is its gradient."),
-    ]
+    unit = "shapes" if f.over_shapes else "seeds"
+    return out + [Claim(
+        names[2], sources[2], normal_paper,
+        f"normal error ° {DDF} {_interval(angle(DDF), 1.0, 'normal_angle_deg')}, "
+        f"{SDF} {_interval(angle(SDF), 1.0, 'normal_angle_deg')} (over {unit}); ratio {f.fmt(normals)}", f.where(),
+        _as_accurate(normals), f"Mean angle between rendered and true normals over the pixels both hit; 'as accurate' "
+        f"= the angle ratio's interval at most {EQUIVALENCE}. The SDF's normal is its gradient.")]
+
+
+def bvh_growth(records: Records, name: str, source: str, paper: str) -> Claim:
+    """The full mesh's warm frame against its smallest LOD's (by configured faces), on the shapes whose full mesh has
+    at least BVH_GROWTH_FACES x the LOD's triangles."""
+    lods: dict[str, int] = {}  # each LOD's configured faces (else the most any run of it kept)
+    for r in (r for e in RENDER_EXPERIMENTS for r in ok_records(records.get(e) or [])):
+        if r.get("family") == "mesh" and r.get("model") != "mesh":
+            n = ((r.get("config") or {}).get("model") or {}).get("faces") or (r.get("fit") or {}).get("faces") or 0
+            lods[str(r.get("model"))] = max(lods.get(str(r.get("model")), 0), int(n))
+    small = min(sorted(lods), key=lambda m: lods[m], default=None)  # the fewest triangles; sorted: ties by name
+    f = frames(records, ("mesh", small)) if small else None
+    if f is None:
+        return _missing(name, source, paper, RENDER_SOURCE)
+    faces = {(shape_name(r), str(r.get("model"))): int((r.get("fit") or {}).get("faces")
+                                                        or (r.get("shape") or {}).get("n_faces") or 0)
+             for r in f.records if r.get("model") in ("mesh", small)}
+    grown = {s for (s, m), n in faces.items()
+             if m == "mesh" and faces.get((s, small), 0) > 0 and n >= BVH_GROWTH_FACES * faces[(s, small)]}
+    bvh = f.ratio("mesh", small, "render_warm_s", shapes=grown) if grown else NO_RATIO
+    counts = ", ".join(f"{s} {faces[(s, 'mesh')]:,}/{faces[(s, small)]:,}" for s in sorted(grown))
+    return Claim(name, source, paper, f"warm frame time mesh / {small} {f.fmt(bvh)} (faces, full/LOD: {counts or '–'}); "
+                 "a DDF's query is one network evaluation whatever the triangle count", f.where(grown),
+                 _side_of_one(bvh, above=True), f"Embree's BVH on the CPU, on the shapes whose full mesh has at least "
+                 f"{BVH_GROWTH_FACES}× the LOD's triangles. The DDF half holds by construction (its cost is its "
+                 "network's, fixed by the preset); the row tests the BVH half.")
 
 
 def untested_sources(records: Records) -> list[Claim]:

@@ -144,7 +144,7 @@ def footnote(sets: dict[str, list[Record]]) -> str:
 
 def frame_records(sets: dict[str, list[Record]]) -> list[Record]:
     """render_time's records, and render_shapes' of the models render_time has none of (one experiment a model)."""
-    timed = {r.get("model") for r in sets[FRAMES]}
+    timed = {r.get("model") for r in ok_records(sets[FRAMES])}
     return sets[FRAMES] + [r for r in sets[OTHER_FRAMES] if r.get("model") not in timed]
 
 
