@@ -294,7 +294,7 @@ def plot_frames_by_shape(records: list[dict[str, Any]], out_dir: str) -> list[st
     ax.set(yscale="log", ylabel="warm frame time (s)", title="warm frame (median of repeats) by shape: mean ± std "
            "over seeds")
     ax.grid(True, axis="y", which="both", alpha=0.3)
-    ax.legend(fontsize=7, ncol=min(3, len(models)))
+    ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.0, 1.0))  # beside the axes, off the bars
     return _save(fig, out_dir, "frames_by_shape")
 
 
