@@ -119,10 +119,11 @@ def _write_section(out_dir: str, name: str, title: str, rows: list[dict[str, Any
 
 def write_report(source: str, out_dir: str, note: str | None = None,
                  kinds: tuple[str, ...] | None = None, sweep: list[str] | None = None,
-                 allow_mixed_commits: bool = False) -> str:
+                 allow_mixed_commits: bool = False, draw: bool = True) -> str:
     """Write the tables, plots, report.md and the compact records for the records of source (a folder of run
     records or a compact file); return the markdown table. Every file but the images and sweep_status.md
     depends on the records and options alone, so the report regenerates byte for byte from its compact file.
+    draw=False draws no image and links the ones out_dir already holds (a check of the text files).
     Raises MixedCommits when the records come from several code commits (unless allowed)."""
     records = compact.load_records(source)
     shas = code_commits(records)
@@ -150,7 +151,9 @@ def write_report(source: str, out_dir: str, note: str | None = None,
     per_run(records).to_csv(os.path.join(out_dir, "runs.csv"), index=False)
     experiment = _experiment(records, source)
     kind = _experiment_file(records, experiment)
-    written = write_plots(records, out_dir, kinds if kinds is not None else plots_for(kind))
+    chosen = kinds if kinds is not None else plots_for(kind)
+    written = write_plots(records, out_dir, chosen) if draw else \
+        [p for k in chosen for p in (os.path.join(out_dir, f"{k}.{ext}") for ext in ("png", "pdf")) if os.path.isfile(p)]
     gallery = write_gallery(records, out_dir) or os.path.join(out_dir, GALLERY)
     written += [gallery] if os.path.isfile(gallery) else []  # a compact rebuild keeps the gallery it cannot draw
     pairs = paired_report(kind, records)
@@ -159,7 +162,7 @@ def write_report(source: str, out_dir: str, note: str | None = None,
             fh.write(pairs)
     extra = [pairs] if pairs is not None else []
     if kind == "shape_suite":
-        extra += shape_suite.sections(records, out_dir)
+        extra += shape_suite.sections(records, out_dir, draw)
     if kind == "tune_finalists":
         extra += finalists.sections(records)
     if kind in ("convergence", "paper_ddf", "gan_epochs"):

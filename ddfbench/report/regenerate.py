@@ -4,7 +4,7 @@
 --from-records rebuilds every report below --reports that holds its compact records (records.jsonl.gz) from
 those alone (and <reports>/claims.md from them, ddfbench.report.claims; and the verdict table, reports/verdict.md and the README's block, ddfbench.report.verdict), running no fit, with the options it was written with (report_options.json); --check writes into a
 scratch folder instead and exits 1 naming each committed file that differs, byte for byte, from its rebuild
-(text files: .md, .csv, .tex; the images are drawn from the same rows and are not compared; sweep_status.md is
+(text files: .md, .csv, .tex; the images are not drawn, those committed are linked; sweep_status.md is
 the state of the machine that ran the sweep). CI runs --check.
 
 Without --from-records:
@@ -94,15 +94,16 @@ def reports_with_records(reports: str) -> list[str]:
     return sorted(folder for folder, _, files in os.walk(reports) if compact.FILE in files)
 
 
-def rebuild(folder: str, into: str) -> None:
-    """Write the report of folder's compact records into `into`, with the options it was written with."""
+def rebuild(folder: str, into: str, draw: bool = True) -> None:
+    """Write the report of folder's compact records into `into`, with the options it was written with (draw=False:
+    no image drawn, those `into` holds linked)."""
     options = {}  # a compact file written by report.compact alone: the report's defaults
     if os.path.isfile(os.path.join(folder, OPTIONS_FILE)):
         with open(os.path.join(folder, OPTIONS_FILE)) as fh:
             options = json.load(fh)
     kinds = tuple(options["plots"]) if options.get("plots") is not None else None
     write_report(os.path.join(folder, compact.FILE), into, note=options.get("note"), kinds=kinds,
-                 allow_mixed_commits=bool(options.get("allow_mixed_commits")))
+                 allow_mixed_commits=bool(options.get("allow_mixed_commits")), draw=draw)
 
 
 def differences(committed: str, rebuilt: str) -> list[str]:
@@ -132,7 +133,7 @@ def from_records(reports: str, check: bool, readme: str | None = None) -> int:
             # kept, not compared: the images; an input: the suite's measured tags (read, not rewritten)
             for name in (f for f in os.listdir(folder) if f.endswith((".png", ".pdf")) or f == shape_suite.TAGS_FILE):
                 shutil.copy2(os.path.join(folder, name), scratch)
-            rebuild(folder, scratch)
+            rebuild(folder, scratch, draw=False)
             differing += [os.path.join(folder, name) for name in differences(folder, scratch)]
     claims_md = os.path.join(reports, "claims.md")
     if not check:

@@ -192,8 +192,9 @@ def per_shape_markdown(records: list[Record], tags: pd.DataFrame) -> str:
     return pipe_table(header, rows)
 
 
-def sections(records: list[Record], out_dir: str) -> list[str]:
-    """The markdown sections of the suite report (and their .csv files, and by_axis.png, written into out_dir)."""
+def sections(records: list[Record], out_dir: str, draw: bool = True) -> list[str]:
+    """The markdown sections of the suite report (and their .csv files, and by_axis.png unless not draw, written
+    into out_dir)."""
     tags = tags_table(out_dir, sorted({shape_name(r) for r in records}))
     fam, pairs, axes, failed = family_rows(records), pair_rows(records), axis_rows(records, tags), not_converged(records)
     out = ["## The shapes and their measured difficulty\n\nthinnest: 1st percentile of the inward wall thickness "
@@ -234,7 +235,8 @@ def sections(records: list[Record], out_dir: str) -> list[str]:
                          [[str(r["model"]), r["shape"], f"{r['failed']} of {r['seeds']}", str(r.get("steps")),
                            "–" if r.get("epochs") is None else f"{float(r['epochs']):.3g}"] for r in failed]))
     pd.DataFrame(axes).to_csv(os.path.join(out_dir, "by_axis.csv"), index=False, float_format="%.6g")
-    plot_axes(records, tags, os.path.join(out_dir, "by_axis.png"))
+    if draw:
+        plot_axes(records, tags, os.path.join(out_dir, "by_axis.png"))
     out.append("![by_axis.png](by_axis.png)")
     return out
 
