@@ -320,6 +320,11 @@ BVH_GROWTH_FACES = 5  # the BVH row keeps the shapes whose full mesh has at leas
 NO_RATIO = across_shapes.OverShapes(math.nan, math.nan, math.nan, 0)
 
 
+def _over_pairs(s: Summary) -> across_shapes.OverShapes:
+    """A log ratio summarized over paired runs as the ratio with its exponentiated interval (none: NO_RATIO)."""
+    return across_shapes.OverShapes(math.exp(s.mean), math.exp(s.lo), math.exp(s.hi), s.n) if s.n else NO_RATIO
+
+
 def _on_gpu(records: list[dict[str, Any]]) -> bool:
     return any(str((r.get("env") or {}).get("device", "")).startswith("cuda") for r in records)
 
@@ -361,8 +366,7 @@ class Frames:
         if self.over_shapes:
             means = lambda m: shape_means((key[0], v) for key, v in self._pick(m, metric, shapes).items())  # noqa: E731
             return across_shapes.ratio(means(a), means(b))
-        s = paired.log_ratio(self._pick(a, metric, shapes), self._pick(b, metric, shapes))
-        return across_shapes.OverShapes(math.exp(s.mean), math.exp(s.lo), math.exp(s.hi), s.n) if s.n else NO_RATIO
+        return _over_pairs(paired.log_ratio(self._pick(a, metric, shapes), self._pick(b, metric, shapes)))
 
     def within_run(self, model: str, metric: str, metric_b: str) -> across_shapes.OverShapes:
         """Each run's `metric` / its `metric_b`: over shapes the geometric mean of the per-shape geometric means over
@@ -372,8 +376,7 @@ class Frames:
         if self.over_shapes:
             return across_shapes.geometric({s: math.exp(v) for s, v in shape_means(
                 (key[0], x) for key, x in logs.items()).items()})
-        s = summarize_values(logs.values())
-        return across_shapes.OverShapes(math.exp(s.mean), math.exp(s.lo), math.exp(s.hi), s.n) if s.n else NO_RATIO
+        return _over_pairs(summarize_values(logs.values()))
 
     def values(self, model: str, metric: str) -> list[float]:
         """The model's `metric`: one per-shape mean over seeds a shape, or on one shape one value a seed."""
