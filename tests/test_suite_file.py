@@ -23,6 +23,28 @@ def test_the_core_plan_expands_each_experiment_as_its_sweep_does():
     assert rows["tune_finalists"]["jobs"] == len(plugins.members("model", "tune_finalists")) * 3 * 4 * 3
 
 
+def timed(model, level, seconds, fit_seconds, experiment="pareto"):
+    return {"model": model, "experiment": experiment, "overrides": [f"model={model}", f"capacity={level}"],
+            "started": "2026-01-01T00:00:00+00:00", "finished": f"2026-01-01T00:{seconds // 60:02d}:{seconds % 60:02d}+00:00",
+            "fit": {"seconds": fit_seconds}}
+
+
+def test_a_job_costs_what_its_own_level_cost_and_a_wall_clock_job_at_least_its_bound():
+    entry = suite.Entry("pareto", "reports/pareto")
+    steps = suite.Sweep({("m", "c1"): 3, ("m", "c4"): 3}, "steps", 20.0)
+    records = {"reports/pareto": [timed("m", "c1", 10, 8), timed("m", "c4", 100, 90)],
+               "reports/other": [timed("m", "c4", 500, 490, experiment="storage")]}
+    assert suite.job_seconds(entry, "m", "c4", steps, records) == (100, "reports/pareto")
+    assert suite.job_seconds(entry, "m", "c2", steps, records) == (55, "reports/pareto")  # no c2: the model's median
+    # another experiment's c4 is another network: only its model counts, after the entry's own records
+    assert suite.job_seconds(entry, "m", "c4", steps, {"reports/other": records["reports/other"]}) == (500, "other reports")
+    clock = suite.Sweep({("m", "c1"): 3}, "wall-clock", 600.0)
+    assert suite.job_seconds(entry, "m", "c1", clock, records) == (602, "reports/pareto")  # 600 s + 2 s outside the fit
+    assert suite.job_seconds(entry, "x", "c1", clock, records) == (None, "no record")
+    long = {r["experiment"]: r for r in suite.plan("v1", "long")}
+    assert long["convergence"]["cpu_hours"] >= long["convergence"]["jobs"] * 600 / 3600
+
+
 def test_a_bad_suite_or_tier_is_one_line_naming_it(tmp_path, monkeypatch):
     with pytest.raises(InputError, match=r"suite v1: no tier 'fast' \(tiers: core, long, gpu\)"):
         suite.plan("v1", "fast")

@@ -2,8 +2,9 @@
 
 A suite file (conf/suite/<name>.yaml) names the benchmark: per tier, each experiment with the report folder it
 writes and the overrides its command line adds. `run --dry-run` prints each experiment's jobs per model and its
-estimated CPU-hours, from the committed records' wall time per job (the report's own records.jsonl.gz, else any
-committed record of the same model, else unknown); `run` runs each experiment (Hydra resumes finished jobs and
+estimated CPU-hours, from the committed records' wall time per job (the report's own records.jsonl.gz at the job's
+capacity level, else of its model, else any committed record of the same model, else unknown; a wall-clock job costs
+at least its bound); `run` runs each experiment (Hydra resumes finished jobs and
 prints a progress line per job with an ETA), then writes its report. `status` says, per report, the code commit
 its records come from and whether the code or config of a model it ran changed since (stale), by `git diff`.
 """
@@ -59,8 +60,24 @@ def load_suite(name: str) -> dict[str, list[Entry]]:
     return out
 
 
-def jobs_per_model(entry: Entry) -> dict[str, int]:
-    """{model: jobs} of the experiment's sweep as Hydra's basic sweeper expands it (no job is composed)."""
+@dataclass
+class Sweep:
+    """An experiment's sweep as Hydra's basic sweeper expands it (no job composed): jobs per (model, capacity level;
+    "" when the sweep sets none) and its fit budget (train.budget; train.max_seconds, the wall-clock bound)."""
+
+    jobs: dict[tuple[str, str], int]
+    budget: str
+    max_seconds: float
+
+    def per_model(self) -> dict[str, int]:
+        out: dict[str, int] = {}
+        for (model, _), n in self.jobs.items():
+            out[model] = out.get(model, 0) + n
+        return out
+
+
+def expand(entry: Entry) -> Sweep:
+    """The entry's sweep: its jobs per model and level, and its fit budget."""
     from hydra import initialize_config_dir
     from hydra._internal.core_plugins.basic_sweeper import BasicSweeper
     from hydra.core.global_hydra import GlobalHydra
@@ -75,12 +92,19 @@ def jobs_per_model(entry: Entry) -> dict[str, int]:
         params = [f"{k}={v}" for k, v in (master.hydra.sweeper.get("params") or {}).items()]
         parsed = OverridesParser.create(config_loader=loader).parse_overrides(params + overrides)
         default_model = str(master.hydra.runtime.choices.get("model", "?"))
-        counts: dict[str, int] = {}
+        jobs: dict[tuple[str, str], int] = {}
         for batch in BasicSweeper.split_arguments(parsed, None):
             for job in batch:
-                model = next((o.split("=", 1)[1] for o in job if o.startswith("model=")), default_model)
-                counts[model] = counts.get(model, 0) + 1
-    return counts
+                values = dict(o.split("=", 1) for o in job if "=" in o)
+                key = (values.get("model", default_model), values.get("capacity", ""))
+                jobs[key] = jobs.get(key, 0) + 1
+        train = master.get("train") or {}
+        return Sweep(jobs, str(train.get("budget", "steps")), float(train.get("max_seconds") or 0.0))
+
+
+def jobs_per_model(entry: Entry) -> dict[str, int]:
+    """{model: jobs} of the experiment's sweep."""
+    return expand(entry).per_model()
 
 
 def _seconds(rec: dict[str, Any]) -> float | None:
@@ -88,6 +112,11 @@ def _seconds(rec: dict[str, Any]) -> float | None:
         return (dt.datetime.fromisoformat(rec["finished"]) - dt.datetime.fromisoformat(rec["started"])).total_seconds()
     except (KeyError, TypeError, ValueError):
         return None
+
+
+def _level(rec: dict[str, Any]) -> str:
+    """The capacity level a record's command line set ("" when none)."""
+    return next((o.split("=", 1)[1] for o in rec.get("overrides") or [] if o.startswith("capacity=")), "")
 
 
 def committed_records(reports: str) -> dict[str, list[dict[str, Any]]]:
@@ -99,15 +128,29 @@ def committed_records(reports: str) -> dict[str, list[dict[str, Any]]]:
     return out
 
 
-def job_seconds(entry: Entry, model: str, records: dict[str, list[dict[str, Any]]]) -> tuple[float | None, str]:
-    """Median wall seconds of one job of `model` and where it was measured (the entry's report, else any report)."""
-    own = [s for r in records.get(entry.report, []) if r.get("model") == model and (s := _seconds(r)) is not None]
-    if own:
-        return statistics.median(own), entry.report
-    other = [(s, folder) for folder, recs in records.items() for r in recs
-             if r.get("model") == model and (s := _seconds(r)) is not None]
-    if other:
-        return statistics.median(s for s, _ in other), "other reports"
+def job_seconds(entry: Entry, model: str, level: str, sweep: Sweep,
+                records: dict[str, list[dict[str, Any]]]) -> tuple[float | None, str]:
+    """Wall seconds of one job of `model` at capacity `level` and where they were measured: the median of the
+    first non-empty of (the entry's report, same model and level), (the entry's report, same model), (any report of
+    the same experiment, model and level), (any report, same model). A level's meaning is its experiment's, so
+    another experiment's records count only by model. A wall-clock sweep's job costs at least its bound plus what
+    the measured jobs spent outside their fit (evaluation, rendering)."""
+    candidates = (
+        (entry.report, lambda folder, r: folder == entry.report and r.get("model") == model and _level(r) == level),
+        (entry.report, lambda folder, r: folder == entry.report and r.get("model") == model),
+        ("other reports", lambda folder, r: (r.get("experiment") == entry.experiment and r.get("model") == model
+                                             and _level(r) == level)),
+        ("other reports", lambda folder, r: r.get("model") == model),
+    )
+    for source, matches in candidates:
+        found = [r for folder, recs in records.items() for r in recs if matches(folder, r) and _seconds(r) is not None]
+        if found:
+            seconds = statistics.median(_seconds(r) for r in found)
+            if sweep.budget == "wall-clock":
+                outside = statistics.median(max(0.0, _seconds(r) - float((r.get("fit") or {}).get("seconds") or 0.0))
+                                            for r in found)
+                seconds = max(seconds, sweep.max_seconds + outside)
+            return seconds, source
     return None, "no record"
 
 
@@ -119,18 +162,18 @@ def plan(suite: str, tier: str, reports: str = os.path.join(ROOT, "reports")) ->
     records = committed_records(reports)
     rows = []
     for entry in tiers[tier]:
-        counts = jobs_per_model(entry)
-        hours, unknown, sources = 0.0, [], set()
-        for model, n in counts.items():
-            seconds, source = job_seconds(entry, model, records)
+        sweep = expand(entry)
+        hours, unknown, sources = 0.0, set(), set()
+        for (model, level), n in sweep.jobs.items():
+            seconds, source = job_seconds(entry, model, level, sweep, records)
             if seconds is None:
-                unknown.append(model)
+                unknown.add(model)
             else:
                 hours += n * seconds / 3600
                 sources.add(source)
-        rows.append({"experiment": entry.experiment, "report": entry.report, "jobs": sum(counts.values()),
-                     "models": len(counts), "cpu_hours": hours, "unknown": unknown, "sources": sorted(sources),
-                     "overrides": entry.overrides})
+        rows.append({"experiment": entry.experiment, "report": entry.report, "jobs": sum(sweep.jobs.values()),
+                     "models": len(sweep.per_model()), "cpu_hours": hours, "unknown": sorted(unknown),
+                     "sources": sorted(sources), "overrides": entry.overrides})
     return rows
 
 
