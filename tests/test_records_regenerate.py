@@ -67,6 +67,28 @@ def test_the_check_names_a_hand_edited_table(results, tmp_path, capsys):
     assert f"{table} differs" in capsys.readouterr().err
 
 
+def test_the_index_says_which_reports_regenerate_and_a_stale_index_fails_the_check(results, tmp_path, capsys):
+    assert report_main([str(results), "--out", str(tmp_path / "rep"), "--plots", "none"]) == 0
+    (tmp_path / "old" / "nested").mkdir(parents=True)  # a report whose records stayed on another machine
+    (tmp_path / "old" / "nested" / "report.md").write_text(
+        "# old\n\n3 run records from `<out_dir>/old` (code: 0123456789abcdef0123456789abcdef01234567)\n")
+    readme = str(tmp_path / "none.md")
+    assert regenerate_main(["--from-records", "--reports", str(tmp_path), "--readme", readme]) == 0
+    rows = {line.split(" | ")[0]: line for line in (tmp_path / "index.md").read_text().splitlines()
+            if line.startswith("| [`")}
+    code = compact.read_compact(str(tmp_path / "rep" / compact.FILE))[0]["env"]["code_sha"][:7]
+    assert rows["| [`rep/`](rep/)"].endswith(f"| – | 3 | {code} | yes |")  # two finished runs and the failed one
+    assert rows["| [`old/nested/`](old/nested/)"].endswith("| – | 3 | 0123456 | no: records not committed |")
+    assert "1 of 2 report folders regenerate" in (tmp_path / "index.md").read_text()
+    shutil.copytree(tmp_path / "rep", tmp_path / "rep2")
+    assert regenerate_main(["--from-records", "--reports", str(tmp_path), "--readme", readme]) == 0
+    assert "2 of 3 report folders regenerate" in (tmp_path / "index.md").read_text()
+    os.remove(tmp_path / "rep2" / compact.FILE)  # its records go: the committed index no longer says what is true
+    capsys.readouterr()
+    assert regenerate_main(["--from-records", "--reports", str(tmp_path), "--readme", readme, "--check"]) == 1
+    assert f"{tmp_path / 'index.md'} differs" in capsys.readouterr().err
+
+
 def test_a_report_goes_beside_its_records_unless_out_names_a_folder(results):
     assert report_main([str(results), "--plots", "none"]) == 0
     assert (results / "report" / "report.md").is_file()

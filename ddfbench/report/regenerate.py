@@ -2,7 +2,8 @@
 `python -m ddfbench.report.regenerate --from-records [--reports DIR] [--check]`
 
 --from-records rebuilds every report below --reports that holds its compact records (records.jsonl.gz) from
-those alone (and <reports>/claims.md from them, ddfbench.report.claims; and the verdict table, reports/verdict.md and the README's block, ddfbench.report.verdict), running no fit, with the options it was written with (report_options.json); --check writes into a
+those alone (and <reports>/claims.md from them, ddfbench.report.claims; <reports>/index.md, every report folder with its
+commit and whether it has records, ddfbench.report.index; and the verdict table, reports/verdict.md and the README's block, ddfbench.report.verdict), running no fit, with the options it was written with (report_options.json); --check writes into a
 scratch folder instead and exits 1 naming each committed file that differs, byte for byte, from its rebuild
 (text files: .md, .csv, .tex; the images are not drawn, those committed are linked; sweep_status.md is
 the state of the machine that ran the sweep). CI runs --check.
@@ -36,7 +37,7 @@ import time
 
 from ddfbench.core import plugins
 from ddfbench.fit import tune
-from ddfbench.report import compact, matched, shape_suite, verdict
+from ddfbench.report import compact, index, matched, shape_suite, verdict
 from ddfbench.report import tune as tune_report
 from ddfbench.report.__main__ import OPTIONS_FILE, STATUS_FILE, MixedCommits, write_report
 from ddfbench.report.claims import write_claims, write_committed_claims
@@ -135,15 +136,18 @@ def from_records(reports: str, check: bool, readme: str | None = None) -> int:
                 shutil.copy2(os.path.join(folder, name), scratch)
             rebuild(folder, scratch, draw=False)
             differing += [os.path.join(folder, name) for name in differences(folder, scratch)]
-    claims_md = os.path.join(reports, "claims.md")
-    if not check:
-        write_committed_claims(reports, claims_md)
-        print(f"rebuilt {claims_md}", flush=True)
-    elif os.path.isfile(claims_md):  # a reports folder without a claims table (a scratch one) has none to check
-        with tempfile.TemporaryDirectory() as scratch:
-            write_committed_claims(reports, os.path.join(scratch, "claims.md"))
-            if not filecmp.cmp(claims_md, os.path.join(scratch, "claims.md"), shallow=False):
-                differing.append(claims_md)
+    generated = {"claims.md": lambda path: write_committed_claims(reports, path),  # the files made from all reports
+                 index.FILE: lambda path: index.write_index(reports, path)}
+    for name, write in generated.items():
+        path = os.path.join(reports, name)
+        if not check:
+            write(path)
+            print(f"rebuilt {path}", flush=True)
+        elif os.path.isfile(path):  # a reports folder without one (a scratch folder) has none to check
+            with tempfile.TemporaryDirectory() as scratch:
+                write(os.path.join(scratch, name))
+                if not filecmp.cmp(path, os.path.join(scratch, name), shallow=False):
+                    differing.append(path)
     for path in differing:
         print(f"ddfbench.report.regenerate: {path} differs from its rebuild from {compact.FILE}", file=sys.stderr)
     if check:
