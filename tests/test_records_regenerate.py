@@ -8,7 +8,7 @@ import statistics
 
 import pytest
 
-from ddfbench.report import compact
+from ddfbench.report import compact, index
 from ddfbench.report.__main__ import main as report_main
 from ddfbench.report.regenerate import differences, reports_with_records
 from ddfbench.report.regenerate import main as regenerate_main
@@ -80,9 +80,15 @@ def test_the_index_says_which_reports_regenerate_and_a_stale_index_fails_the_che
     assert rows["| [`rep/`](rep/)"].endswith(f"| – | 3 | {code} | yes |")  # two finished runs and the failed one
     assert rows["| [`old/nested/`](old/nested/)"].endswith("| – | 3 | 0123456 | no: records not committed |")
     assert "1 of 2 report folders regenerate" in (tmp_path / "index.md").read_text()
+    (tmp_path / "old" / "again").mkdir()  # a re-measurement of runs' artifacts
+    (tmp_path / "old" / "again" / "table.md").write_text("`python -m ddfbench.report.reevaluate <out_dir>/old --out x`: "
+                                                         "3 runs measured again, records of code abcdef0, measured by "
+                                                         "code 1234567.\n")
+    (tmp_path / "old" / "again" / "table.csv").write_text("model\n")
+    assert index.provenance(str(tmp_path / "old" / "again")) == index.Provenance(3, ["abcdef0"], index.ARTIFACTS)
     shutil.copytree(tmp_path / "rep", tmp_path / "rep2")
     assert regenerate_main(["--from-records", "--reports", str(tmp_path), "--readme", readme]) == 0
-    assert "2 of 3 report folders regenerate" in (tmp_path / "index.md").read_text()
+    assert "2 of 4 report folders regenerate" in (tmp_path / "index.md").read_text()
     os.remove(tmp_path / "rep2" / compact.FILE)  # its records go: the committed index no longer says what is true
     capsys.readouterr()
     assert regenerate_main(["--from-records", "--reports", str(tmp_path), "--readme", readme, "--check"]) == 1

@@ -110,3 +110,15 @@ def test_every_gallery_image_loads_and_the_claims_filter_hides_rows(browser, bui
     shown = browser.execute_script(
         "return Array.from(document.querySelectorAll('#claims tbody tr')).filter(r => r.style.display !== 'none').length")
     assert 0 < shown < rows and not errors(browser)
+
+
+def test_each_report_page_names_its_commit_and_the_index_marks_those_without_records(built):
+    out, got = built
+    code = compact.read_compact(os.path.join(ROOT, "reports", "default", compact.FILE))[0]["env"]["code_sha"][:7]
+    assert f"runs of code {code}; it regenerates from its committed records" in (out / "report-default.html").read_text()
+    front = (out / "index.html").read_text()
+    folders = site.report_folders(os.path.join(ROOT, "reports"))
+    without = [rel for rel in folders if not os.path.isfile(os.path.join(ROOT, "reports", rel, compact.FILE))]
+    assert without and len(without) < len(folders) == got["pages"]
+    for rel in folders:
+        assert (f">{rel}</a> (not regenerable from records)" in front) == (rel in without), rel

@@ -1,24 +1,42 @@
 """reports/index.md: every committed report folder at a glance — which suite tier it belongs to, how many runs, from
-which code commit, and whether it regenerates from committed records (`regenerate --from-records`) or is a
-record-less note of an older run.
+which code commit, and whether it regenerates from committed records (`regenerate --from-records`).
 
-A report folder is a folder below reports/ with a report.md, a tuning study's trials.md, or compact records. Its runs
-and commits are read from its records when it has them, else from the line its report wrote ("N run records ...
-(code: SHA)", or a study's "N records ... (code SHA"). `regenerate --from-records` writes the index and `--check`
-compares it, so a report that gains or loses its records shows here.
+A report folder is a folder below reports/ with a report.md, a table.csv, a tuning study's trials.md, or compact
+records. Its runs and commits are read from its records when it has them, else from the line its tool wrote first
+("N run records ... (code: SHA)", a study's "N records ... (code SHA", a re-measurement's "N runs ... records of code
+SHA"). A re-measurement (ddfbench.report.reevaluate, zero_level, edge_error) reads the runs' artifacts (meshes,
+networks, renders), which no compact record holds, so it regenerates only where those runs are. `regenerate
+--from-records` writes the index and `--check` compares it, so a report that gains or loses its records shows here.
 """
 
 from __future__ import annotations
 
 import os
 import re
+from dataclasses import dataclass
 
 from ddfbench.report import compact
 from ddfbench.report.suite import load_suite
 
 FILE = "index.md"
-MARKERS = ("report.md", "trials.md", compact.FILE)
-_RUNS = re.compile(r"(\d+) (?:run )?records\b[^(\n]*\(code:? ([0-9a-f]{7,40}(?:, [0-9a-f]{7,40})*)")
+MARKERS = ("report.md", "table.csv", "trials.md", compact.FILE)
+TEXTS = ("report.md", "best.md", "trials.md", "table.md")  # where a tool wrote its first line, in this order
+REMEASURED = re.compile(r"^`python -m ddfbench\.report\.(reevaluate|zero_level|edge_error)\b")
+_RECORDS = re.compile(r"(\d+) (?:run )?records\b[^(\n]*\(code:? ([0-9a-f]{7,40}(?:, [0-9a-f]{7,40})*)")
+_RUNS = re.compile(r"(\d+) (?:[A-Za-z]+ )?runs?\b.*?records of code ([0-9a-f]{7,40})")
+REGENERATES = "yes"
+NOT_COMMITTED = "no: records not committed"
+ARTIFACTS = "no: re-measured from the runs' artifacts"
+
+
+@dataclass
+class Provenance:
+    """What one report folder was made from: runs (None when unknown), code commits (7-character SHAs) and whether
+    it regenerates from committed records (REGENERATES) or why not."""
+
+    runs: int | None
+    commits: list[str]
+    regenerates: str
 
 
 def report_folders(reports: str) -> list[str]:
@@ -27,22 +45,24 @@ def report_folders(reports: str) -> list[str]:
                   if folder != reports and any(m in files for m in MARKERS))
 
 
-def provenance(folder: str) -> tuple[int | None, list[str], bool]:
-    """(runs, code commits as 7-character SHAs, whether the records are committed) of one report folder; runs None
-    and no commit when neither its records nor its report say."""
+def provenance(folder: str) -> Provenance:
+    """The provenance of one report folder, from its records or the first line its tool wrote."""
     if os.path.isfile(os.path.join(folder, compact.FILE)):
         records = compact.read_compact(os.path.join(folder, compact.FILE))
         shas = sorted({str((r.get("env") or {}).get("code_sha"))[:7] for r in records
                        if (r.get("env") or {}).get("code_sha")})
-        return len(records), shas, True
-    for name in ("report.md", "best.md", "trials.md"):
+        return Provenance(len(records), shas, REGENERATES)
+    for name in TEXTS:
         path = os.path.join(folder, name)
-        if os.path.isfile(path):
-            with open(path, encoding="utf-8") as fh:
-                found = _RUNS.search(fh.read())
-            if found:
-                return int(found.group(1)), sorted({s[:7] for s in found.group(2).split(", ")}), False
-    return None, [], False
+        if not os.path.isfile(path):
+            continue
+        with open(path, encoding="utf-8") as fh:
+            text = fh.read()
+        status = ARTIFACTS if REMEASURED.match(text) else NOT_COMMITTED
+        found = _RECORDS.search(text) or _RUNS.search(text)
+        if found:
+            return Provenance(int(found.group(1)), sorted({s[:7] for s in found.group(2).split(", ")}), status)
+    return Provenance(None, [], NOT_COMMITTED)
 
 
 def tiers_of(suite: str) -> dict[str, str]:
@@ -57,19 +77,18 @@ def render_index(reports: str, suite: str = "v1") -> str:
     tiers = tiers_of(suite)
     order = {name: i for i, name in enumerate(tiers)}
     folders = sorted(report_folders(reports), key=lambda f: (order.get(f, len(order)), f))
-    rows = []
-    for name in folders:
-        runs, shas, committed = provenance(os.path.join(reports, name))
-        tier = f"{suite} {tiers[name]}" if name in tiers else "–"
-        regenerates = "yes" if committed else "no: records not committed"
-        rows.append(f"| [`{name}/`]({name}/) | {tier} | {runs if runs is not None else '–'} | "
-                    f"{', '.join(shas) or '–'} | {regenerates} |")
-    done = sum(1 for row in rows if row.endswith("| yes |"))
+    found = {name: provenance(os.path.join(reports, name)) for name in folders}
+    rows = [f"| [`{name}/`]({name}/) | {f'{suite} {tiers[name]}' if name in tiers else '–'} | "
+            f"{p.runs if p.runs is not None else '–'} | {', '.join(p.commits) or '–'} | {p.regenerates} |"
+            for name, p in found.items()]
+    done = sum(p.regenerates == REGENERATES for p in found.values())
+    remeasured = sum(p.regenerates == ARTIFACTS for p in found.values())
     return "\n".join([
         "# Reports at a glance",
         "",
         f"Generated by `python -m ddfbench.report.regenerate --from-records` (ddfbench.report.index). {done} of "
-        f"{len(rows)} report folders regenerate from their committed records (`records.jsonl.gz`); the others "
+        f"{len(rows)} report folders regenerate from their committed records (`records.jsonl.gz`); {remeasured} "
+        "are re-measurements of runs' artifacts (meshes, networks, renders), which stay with the runs; the others "
         "are reports of runs whose records stayed on the machine that ran them: their tables cannot be recomputed "
         f"from this repository. Suite {suite}'s tiers: `conf/suite/{suite}.yaml` (`python -m ddfbench.suite status "
         f"{suite}` says which are stale). Timing benches (`bench/`) keep their raw JSON beside each table.",

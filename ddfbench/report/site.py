@@ -9,7 +9,8 @@ The site opens from the file system with no server (plotly.js is written once be
                       entry per family toggles its points; a shape selector
     claims.html       reports/claims.md as a table, filterable by verdict
     gallery.html      every committed gallery.png
-    <report>.html     one page per report folder with a table.csv: its table and its images
+    <report>.html     one page per report folder with a table.csv: its runs, code commit and whether it regenerates
+                      from committed records (ddfbench.report.index), its table and its images
 
 Plots are drawn by plotly (a well-kept library), never by hand.
 """
@@ -27,7 +28,7 @@ import sys
 import numpy as np
 import pandas as pd
 
-from ddfbench.report import compact
+from ddfbench.report import compact, index
 from ddfbench.report.stats import summarize_values
 from ddfbench.report.tables import per_run
 
@@ -162,6 +163,16 @@ def _slug(rel: str) -> str:
     return "report-" + rel.replace(os.sep, "-")
 
 
+def provenance_line(folder: str) -> str:
+    """Its runs, code commit(s) and whether its records are committed, in words (ddfbench.report.index)."""
+    found = index.provenance(folder)
+    where = {index.REGENERATES: "it regenerates from its committed records",
+             index.ARTIFACTS: "a re-measurement of the runs' artifacts, which stay with the runs"}.get(
+        found.regenerates, "its records are not committed, so its table cannot be recomputed from the repository")
+    return (f"{found.runs if found.runs is not None else 'an unknown number of'} runs of code "
+            f"{', '.join(found.commits) or 'unknown'}; {where}")
+
+
 def write_reports(reports: str, out: str) -> list[str]:
     """One page per report folder: its table.csv and its images (copied under img/). Returns the page names."""
     names = []
@@ -174,7 +185,7 @@ def write_reports(reports: str, out: str) -> list[str]:
             images.append(f"<p><img src='{target}' alt='{html.escape(rel)} {name}'></p>")
         table = pd.read_csv(os.path.join(folder, "table.csv"))
         shown = [c for c in table.columns if not c.endswith(("_ci_lo", "_ci_hi", "_std")) and c != "keys"]
-        body = (f"<p>From <code>reports/{html.escape(rel)}</code>.</p>"
+        body = (f"<p>From <code>reports/{html.escape(rel)}</code>: {provenance_line(folder)}.</p>"
                 + table[shown].to_html(index=False, float_format=lambda v: f"{v:.4g}", na_rep="–") + "".join(images))
         with open(os.path.join(out, f"{slug}.html"), "w") as fh:
             fh.write(page(rel, body))
@@ -206,7 +217,9 @@ def write_site(reports: str, out: str) -> dict[str, int]:
     write_claims(reports, out)
     galleries = write_gallery(reports, out)
     pages = write_reports(reports, out)
-    links = "".join(f"<li><a href='{p}.html'>{html.escape(p[len('report-'):])}</a></li>" for p in pages)
+    links = "".join(f"<li><a href='{p}.html'>{html.escape(rel)}</a>"
+                    f"{'' if index.provenance(os.path.join(reports, rel)).regenerates == index.REGENERATES else ' (not regenerable from records)'}</li>"
+                    for p, rel in zip(pages, report_folders(reports)))
     body = ("<p>ddfbench: which shape representation, at what cost. <a href='pareto.html'>Accuracy against cost</a>, "
             "<a href='claims.html'>the papers' claims</a>, <a href='gallery.html'>galleries</a>, and every report:</p>"
             f"<ul>{links}</ul>")
