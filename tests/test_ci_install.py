@@ -7,6 +7,7 @@ import re
 import pytest
 
 tomllib = pytest.importorskip("tomllib")  # Python 3.11+ (CI's)
+Requirement = pytest.importorskip("packaging.requirements").Requirement
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
@@ -30,6 +31,9 @@ def test_every_dependency_and_extra_is_pinned_for_ci():
     pinned = {canonical(name): version for name, version in pinned.items()}
     missing = sorted({requirement_name(spec) for spec in wanted} - set(pinned))
     assert not missing, f".ci/constraints.txt pins no version of {missing}"
+    for spec in map(Requirement, wanted):  # and each pin satisfies pyproject.toml's range
+        version = pinned[canonical(spec.name)]
+        assert spec.specifier.contains(version, prereleases=True), (str(spec), version)
     assert pinned["torch"].startswith("2.13.0")  # the machine's CPU build, installed by pip before the rest
     with open(os.path.join(ROOT, ".ci", "run")) as fh:
         assert "-c .ci/constraints.txt" in fh.read()

@@ -81,11 +81,14 @@ def test_the_index_says_which_reports_regenerate_and_a_stale_index_fails_the_che
     assert rows["| [`old/nested/`](old/nested/)"].endswith("| – | 3 | 0123456 | no: records not committed |")
     assert "1 of 2 report folders regenerate" in (tmp_path / "index.md").read_text()
     (tmp_path / "old" / "again").mkdir()  # a re-measurement of runs' artifacts
-    (tmp_path / "old" / "again" / "table.md").write_text("`python -m ddfbench.report.reevaluate <out_dir>/old --out x`: "
-                                                         "3 runs measured again, records of code abcdef0, measured by "
-                                                         "code 1234567.\n")
+    (tmp_path / "old" / "again" / "table.md").write_text(
+        "`python -m ddfbench.report.reevaluate <out_dir>/old --out x`: 3 runs measured again, records of code abcdef0, "
+        "measured by code 1234567.\n")
     (tmp_path / "old" / "again" / "table.csv").write_text("model\n")
     assert index.provenance(str(tmp_path / "old" / "again")) == index.Provenance(3, ["abcdef0"], index.ARTIFACTS)
+    (tmp_path / "old" / "again" / "table.md").write_text(  # an older tool's line names no commit
+        "`python -m ddfbench.report.reevaluate <out_dir>/old --out x`: 18 runs measured again (0 unreadable).\n")
+    assert index.provenance(str(tmp_path / "old" / "again")) == index.Provenance(18, [], index.ARTIFACTS)
     shutil.copytree(tmp_path / "rep", tmp_path / "rep2")
     assert regenerate_main(["--from-records", "--reports", str(tmp_path), "--readme", readme]) == 0
     assert "2 of 4 report folders regenerate" in (tmp_path / "index.md").read_text()

@@ -115,10 +115,12 @@ def test_every_gallery_image_loads_and_the_claims_filter_hides_rows(browser, bui
 def test_each_report_page_names_its_commit_and_the_index_marks_those_without_records(built):
     out, got = built
     code = compact.read_compact(os.path.join(ROOT, "reports", "default", compact.FILE))[0]["env"]["code_sha"][:7]
-    assert f"runs of code {code}; it regenerates from its committed records" in (out / "report-default.html").read_text()
+    page = (out / "report-default.html").read_text()
+    assert f"runs of code {code}; it regenerates from its committed records" in page
     front = (out / "index.html").read_text()
-    folders = site.report_folders(os.path.join(ROOT, "reports"))
+    folders = site.table_folders(os.path.join(ROOT, "reports"))
     without = [rel for rel in folders if not os.path.isfile(os.path.join(ROOT, "reports", rel, compact.FILE))]
     assert without and len(without) < len(folders) == got["pages"]
-    for rel in folders:
-        assert (f">{rel}</a> (not regenerable from records)" in front) == (rel in without), rel
+    for rel in folders:  # each link goes to its own folder's page, marked when that folder has no records
+        link = f"<a href='report-{rel.replace(os.sep, '-')}.html'>{rel}</a>"
+        assert (f"{link} (not regenerable from records)" in front) == (rel in without) and link in front, rel

@@ -25,24 +25,31 @@ def test_the_core_plan_expands_each_experiment_as_its_sweep_does():
 
 def timed(model, level, seconds, fit_seconds, experiment="pareto"):
     return {"model": model, "experiment": experiment, "overrides": [f"model={model}", f"capacity={level}"],
-            "started": "2026-01-01T00:00:00+00:00", "finished": f"2026-01-01T00:{seconds // 60:02d}:{seconds % 60:02d}+00:00",
+            "started": "2026-01-01T00:00:00+00:00",
+            "finished": f"2026-01-01T00:{seconds // 60:02d}:{seconds % 60:02d}+00:00",
             "fit": {"seconds": fit_seconds}}
 
 
 def test_a_job_costs_what_its_own_level_cost_and_a_wall_clock_job_at_least_its_bound():
     entry = suite.Entry("pareto", "reports/pareto")
-    steps = suite.Sweep({("m", "c1"): 3, ("m", "c4"): 3}, "steps", 20.0)
     records = {"reports/pareto": [timed("m", "c1", 10, 8), timed("m", "c4", 100, 90)],
-               "reports/other": [timed("m", "c4", 500, 490, experiment="storage")]}
-    assert suite.job_seconds(entry, "m", "c4", steps, records) == (100, "reports/pareto")
-    assert suite.job_seconds(entry, "m", "c2", steps, records) == (55, "reports/pareto")  # no c2: the model's median
-    # another experiment's c4 is another network: only its model counts, after the entry's own records
-    assert suite.job_seconds(entry, "m", "c4", steps, {"reports/other": records["reports/other"]}) == (500, "other reports")
-    clock = suite.Sweep({("m", "c1"): 3}, "wall-clock", 600.0)
-    assert suite.job_seconds(entry, "m", "c1", clock, records) == (602, "reports/pareto")  # 600 s + 2 s outside the fit
-    assert suite.job_seconds(entry, "x", "c1", clock, records) == (None, "no record")
+               "reports/other": [timed("m", "c4", 500, 490, experiment="storage"), timed("m", "c3", 300, 290)]}
+    assert suite.job_seconds(entry, suite.Job("m", "c4", "steps", 20.0), records) == (100, "reports/pareto")
+    # no c2 in its own report: the model's median there
+    assert suite.job_seconds(entry, suite.Job("m", "c2", "steps", 20.0), records) == (55, "reports/pareto")
+    # not in its own report: the same experiment's level elsewhere; another experiment's c4 is another network
+    others = {"reports/other": records["reports/other"]}
+    assert suite.job_seconds(entry, suite.Job("m", "c3", "steps", 20.0), others) == (300, "other reports")
+    assert suite.job_seconds(entry, suite.Job("m", "c4", "steps", 20.0), others) == (400, "other reports")
+    clock = suite.Job("m", "c1", "wall-clock", 600.0)
+    assert suite.job_seconds(entry, clock, records) == (602, "reports/pareto")  # 600 s + 2 s outside the fit
+    assert suite.job_seconds(entry, suite.Job("x", "c1", "wall-clock", 600.0), records) == (None, "no record")
     long = {r["experiment"]: r for r in suite.plan("v1", "long")}
     assert long["convergence"]["cpu_hours"] >= long["convergence"]["jobs"] * 600 / 3600
+    # a swept bound is each job's own: 20 s and 80 s jobs
+    swept = suite.expand(suite.Entry("convergence", "x", ["train.max_seconds=20,80"]))
+    assert {job.max_seconds for job in swept.jobs} == {20.0, 80.0}
+    assert {job.budget for job in swept.jobs} == {"wall-clock"}
 
 
 def test_a_bad_suite_or_tier_is_one_line_naming_it(tmp_path, monkeypatch):

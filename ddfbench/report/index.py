@@ -2,11 +2,12 @@
 which code commit, and whether it regenerates from committed records (`regenerate --from-records`).
 
 A report folder is a folder below reports/ with a report.md, a table.csv, a tuning study's trials.md, or compact
-records. Its runs and commits are read from its records when it has them, else from the line its tool wrote first
-("N run records ... (code: SHA)", a study's "N records ... (code SHA", a re-measurement's "N runs ... records of code
-SHA"). A re-measurement (ddfbench.report.reevaluate, zero_level, edge_error) reads the runs' artifacts (meshes,
-networks, renders), which no compact record holds, so it regenerates only where those runs are. `regenerate
---from-records` writes the index and `--check` compares it, so a report that gains or loses its records shows here.
+records. Its runs and commits are read from its records when it has them, else from the first such line its tool
+wrote ("N run records ... (code: SHA)", a study's "N records ... (code SHA", a re-measurement's "N runs ... records of
+code SHA[, SHA]", or an older one's "N runs measured again" with no commit). A re-measurement
+(ddfbench.report.reevaluate, zero_level, edge_error) reads the runs' artifacts (meshes, networks, renders), which no
+compact record holds, so it regenerates only where those runs are. `regenerate --from-records` writes the index and
+`--check` compares it, so a report that gains or loses its records shows here.
 """
 
 from __future__ import annotations
@@ -16,14 +17,16 @@ import re
 from dataclasses import dataclass
 
 from ddfbench.report import compact
-from ddfbench.report.suite import load_suite
+from ddfbench.report.suite import ROOT, load_suite
+from ddfbench.run.runs import code_commits
 
 FILE = "index.md"
 MARKERS = ("report.md", "table.csv", "trials.md", compact.FILE)
 TEXTS = ("report.md", "best.md", "trials.md", "table.md")  # where a tool wrote its first line, in this order
 REMEASURED = re.compile(r"^`python -m ddfbench\.report\.(reevaluate|zero_level|edge_error)\b")
-_RECORDS = re.compile(r"(\d+) (?:run )?records\b[^(\n]*\(code:? ([0-9a-f]{7,40}(?:, [0-9a-f]{7,40})*)")
-_RUNS = re.compile(r"(\d+) (?:[A-Za-z]+ )?runs?\b.*?records of code ([0-9a-f]{7,40})")
+_SHAS = r"([0-9a-f]{7,40}(?:, [0-9a-f]{7,40})*)"
+_RECORDS = re.compile(r"(\d+) (?:run )?records\b[^(\n]*\(code:? " + _SHAS)
+_RUNS = re.compile(r"(\d+) (?:[A-Za-z]+ )?runs?\b[^\n]*?(?:records of code " + _SHAS + "|$)", re.M)
 REGENERATES = "yes"
 NOT_COMMITTED = "no: records not committed"
 ARTIFACTS = "no: re-measured from the runs' artifacts"
@@ -49,9 +52,7 @@ def provenance(folder: str) -> Provenance:
     """The provenance of one report folder, from its records or the first line its tool wrote."""
     if os.path.isfile(os.path.join(folder, compact.FILE)):
         records = compact.read_compact(os.path.join(folder, compact.FILE))
-        shas = sorted({str((r.get("env") or {}).get("code_sha"))[:7] for r in records
-                       if (r.get("env") or {}).get("code_sha")})
-        return Provenance(len(records), shas, REGENERATES)
+        return Provenance(len(records), sorted({sha[:7] for sha in code_commits(records)}), REGENERATES)
     for name in TEXTS:
         path = os.path.join(folder, name)
         if not os.path.isfile(path):
@@ -60,21 +61,28 @@ def provenance(folder: str) -> Provenance:
             text = fh.read()
         status = ARTIFACTS if REMEASURED.match(text) else NOT_COMMITTED
         found = _RECORDS.search(text) or _RUNS.search(text)
-        if found:
-            return Provenance(int(found.group(1)), sorted({s[:7] for s in found.group(2).split(", ")}), status)
+        if found or status == ARTIFACTS:
+            shas = found.group(2) if found and found.group(2) else ""
+            return Provenance(int(found.group(1)) if found else None,
+                              sorted({s[:7] for s in shas.split(", ") if s}), status)
     return Provenance(None, [], NOT_COMMITTED)
 
 
-def tiers_of(suite: str) -> dict[str, str]:
-    """{report folder relative to reports/: its tier in the suite}."""
-    return {os.path.relpath(entry.report, "reports"): tier
-            for tier, entries in load_suite(suite).items() for entry in entries}
+def tiers_of(suite: str, reports: str) -> dict[str, str]:
+    """{report folder relative to `reports`: its tier in the suite}, for the suite's report folders below it."""
+    out = {}
+    for tier, entries in load_suite(suite).items():
+        for entry in entries:
+            rel = os.path.relpath(os.path.join(ROOT, entry.report), os.path.abspath(reports))
+            if not rel.startswith(os.pardir):
+                out[rel] = tier
+    return out
 
 
 def render_index(reports: str, suite: str = "v1") -> str:
     """The index as Markdown: one row per report folder, the suite's reports first (by tier, as the suite file
     lists them), then the others by name."""
-    tiers = tiers_of(suite)
+    tiers = tiers_of(suite, reports)
     order = {name: i for i, name in enumerate(tiers)}
     folders = sorted(report_folders(reports), key=lambda f: (order.get(f, len(order)), f))
     found = {name: provenance(os.path.join(reports, name)) for name in folders}

@@ -154,8 +154,8 @@ def write_claims(reports: str, out: str) -> None:
         fh.write(page("Claims", body))
 
 
-def report_folders(reports: str) -> list[str]:
-    """Every folder below reports with a table.csv, relative to reports, sorted."""
+def table_folders(reports: str) -> list[str]:
+    """Every folder below reports with a table.csv (a page each), relative to reports, sorted."""
     return sorted(os.path.relpath(f, reports) for f, _, files in os.walk(reports) if "table.csv" in files)
 
 
@@ -163,9 +163,8 @@ def _slug(rel: str) -> str:
     return "report-" + rel.replace(os.sep, "-")
 
 
-def provenance_line(folder: str) -> str:
-    """Its runs, code commit(s) and whether its records are committed, in words (ddfbench.report.index)."""
-    found = index.provenance(folder)
+def provenance_line(found: index.Provenance) -> str:
+    """A report folder's runs, code commit(s) and whether it regenerates from committed records, in words."""
     where = {index.REGENERATES: "it regenerates from its committed records",
              index.ARTIFACTS: "a re-measurement of the runs' artifacts, which stay with the runs"}.get(
         found.regenerates, "its records are not committed, so its table cannot be recomputed from the repository")
@@ -173,11 +172,13 @@ def provenance_line(folder: str) -> str:
             f"{', '.join(found.commits) or 'unknown'}; {where}")
 
 
-def write_reports(reports: str, out: str) -> list[str]:
-    """One page per report folder: its table.csv and its images (copied under img/). Returns the page names."""
-    names = []
-    for rel in report_folders(reports):
+def write_reports(reports: str, out: str) -> list[tuple[str, str, index.Provenance]]:
+    """One page per report folder: its provenance, its table.csv and its images (copied under img/). Returns
+    (page name, folder relative to reports, provenance) per page."""
+    pages = []
+    for rel in table_folders(reports):
         folder, slug = os.path.join(reports, rel), _slug(rel)
+        found = index.provenance(folder)
         images = []
         for name in sorted(f for f in os.listdir(folder) if f.endswith(".png")):
             target = os.path.join("img", f"{slug}-{name}")
@@ -185,12 +186,12 @@ def write_reports(reports: str, out: str) -> list[str]:
             images.append(f"<p><img src='{target}' alt='{html.escape(rel)} {name}'></p>")
         table = pd.read_csv(os.path.join(folder, "table.csv"))
         shown = [c for c in table.columns if not c.endswith(("_ci_lo", "_ci_hi", "_std")) and c != "keys"]
-        body = (f"<p>From <code>reports/{html.escape(rel)}</code>: {provenance_line(folder)}.</p>"
+        body = (f"<p>From <code>reports/{html.escape(rel)}</code>: {provenance_line(found)}.</p>"
                 + table[shown].to_html(index=False, float_format=lambda v: f"{v:.4g}", na_rep="–") + "".join(images))
         with open(os.path.join(out, f"{slug}.html"), "w") as fh:
             fh.write(page(rel, body))
-        names.append(slug)
-    return names
+        pages.append((slug, rel, found))
+    return pages
 
 
 def write_gallery(reports: str, out: str) -> int:
@@ -217,9 +218,9 @@ def write_site(reports: str, out: str) -> dict[str, int]:
     write_claims(reports, out)
     galleries = write_gallery(reports, out)
     pages = write_reports(reports, out)
-    links = "".join(f"<li><a href='{p}.html'>{html.escape(rel)}</a>"
-                    f"{'' if index.provenance(os.path.join(reports, rel)).regenerates == index.REGENERATES else ' (not regenerable from records)'}</li>"
-                    for p, rel in zip(pages, report_folders(reports)))
+    links = "".join(f"<li><a href='{slug}.html'>{html.escape(rel)}</a>"
+                    f"{'' if found.regenerates == index.REGENERATES else ' (not regenerable from records)'}</li>"
+                    for slug, rel, found in pages)
     body = ("<p>ddfbench: which shape representation, at what cost. <a href='pareto.html'>Accuracy against cost</a>, "
             "<a href='claims.html'>the papers' claims</a>, <a href='gallery.html'>galleries</a>, and every report:</p>"
             f"<ul>{links}</ul>")

@@ -60,19 +60,27 @@ def load_suite(name: str) -> dict[str, list[Entry]]:
     return out
 
 
-@dataclass
-class Sweep:
-    """An experiment's sweep as Hydra's basic sweeper expands it (no job composed): jobs per (model, capacity level;
-    "" when the sweep sets none) and its fit budget (train.budget; train.max_seconds, the wall-clock bound)."""
+@dataclass(frozen=True)
+class Job:
+    """What a job's cost depends on: its model, capacity level ("" when the sweep sets none) and fit budget
+    (train.budget; train.max_seconds, the wall-clock bound), as its own overrides or else the experiment set them."""
 
-    jobs: dict[tuple[str, str], int]
+    model: str
+    level: str
     budget: str
     max_seconds: float
 
+
+@dataclass
+class Sweep:
+    """An experiment's sweep as Hydra's basic sweeper expands it (no job composed): how many jobs of each kind."""
+
+    jobs: dict[Job, int]
+
     def per_model(self) -> dict[str, int]:
         out: dict[str, int] = {}
-        for (model, _), n in self.jobs.items():
-            out[model] = out.get(model, 0) + n
+        for job, n in self.jobs.items():
+            out[job.model] = out.get(job.model, 0) + n
         return out
 
 
@@ -92,14 +100,16 @@ def expand(entry: Entry) -> Sweep:
         params = [f"{k}={v}" for k, v in (master.hydra.sweeper.get("params") or {}).items()]
         parsed = OverridesParser.create(config_loader=loader).parse_overrides(params + overrides)
         default_model = str(master.hydra.runtime.choices.get("model", "?"))
-        jobs: dict[tuple[str, str], int] = {}
-        for batch in BasicSweeper.split_arguments(parsed, None):
-            for job in batch:
-                values = dict(o.split("=", 1) for o in job if "=" in o)
-                key = (values.get("model", default_model), values.get("capacity", ""))
-                jobs[key] = jobs.get(key, 0) + 1
         train = master.get("train") or {}
-        return Sweep(jobs, str(train.get("budget", "steps")), float(train.get("max_seconds") or 0.0))
+        jobs: dict[Job, int] = {}
+        for batch in BasicSweeper.split_arguments(parsed, None):
+            for overrides in batch:
+                values = {k.lstrip("+"): v for k, v in (o.split("=", 1) for o in overrides if "=" in o)}
+                job = Job(values.get("model", default_model), values.get("capacity", ""),
+                          values.get("train.budget", str(train.get("budget", "steps"))),
+                          float(values.get("train.max_seconds", train.get("max_seconds") or 0.0)))
+                jobs[job] = jobs.get(job, 0) + 1
+        return Sweep(jobs)
 
 
 def jobs_per_model(entry: Entry) -> dict[str, int]:
@@ -128,13 +138,13 @@ def committed_records(reports: str) -> dict[str, list[dict[str, Any]]]:
     return out
 
 
-def job_seconds(entry: Entry, model: str, level: str, sweep: Sweep,
-                records: dict[str, list[dict[str, Any]]]) -> tuple[float | None, str]:
-    """Wall seconds of one job of `model` at capacity `level` and where they were measured: the median of the
-    first non-empty of (the entry's report, same model and level), (the entry's report, same model), (any report of
-    the same experiment, model and level), (any report, same model). A level's meaning is its experiment's, so
-    another experiment's records count only by model. A wall-clock sweep's job costs at least its bound plus what
-    the measured jobs spent outside their fit (evaluation, rendering)."""
+def job_seconds(entry: Entry, job: Job, records: dict[str, list[dict[str, Any]]]) -> tuple[float | None, str]:
+    """Wall seconds of one job and where they were measured: the median of the first non-empty of (the entry's
+    report, same model and level), (the entry's report, same model), (any report of the same experiment, model and
+    level), (any report, same model). A level's meaning is its experiment's, so another experiment's records count
+    only by model. A wall-clock job costs at least its bound plus what the measured jobs spent outside their fit
+    (evaluation, rendering, accuracy probes: a lower bound where they took fewer probes)."""
+    model, level = job.model, job.level
     candidates = (
         (entry.report, lambda folder, r: folder == entry.report and r.get("model") == model and _level(r) == level),
         (entry.report, lambda folder, r: folder == entry.report and r.get("model") == model),
@@ -146,10 +156,10 @@ def job_seconds(entry: Entry, model: str, level: str, sweep: Sweep,
         found = [r for folder, recs in records.items() for r in recs if matches(folder, r) and _seconds(r) is not None]
         if found:
             seconds = statistics.median(_seconds(r) for r in found)
-            if sweep.budget == "wall-clock":
+            if job.budget == "wall-clock":
                 outside = statistics.median(max(0.0, _seconds(r) - float((r.get("fit") or {}).get("seconds") or 0.0))
                                             for r in found)
-                seconds = max(seconds, sweep.max_seconds + outside)
+                seconds = max(seconds, job.max_seconds + outside)
             return seconds, source
     return None, "no record"
 
@@ -164,10 +174,10 @@ def plan(suite: str, tier: str, reports: str = os.path.join(ROOT, "reports")) ->
     for entry in tiers[tier]:
         sweep = expand(entry)
         hours, unknown, sources = 0.0, set(), set()
-        for (model, level), n in sweep.jobs.items():
-            seconds, source = job_seconds(entry, model, level, sweep, records)
+        for job, n in sweep.jobs.items():
+            seconds, source = job_seconds(entry, job, records)
             if seconds is None:
-                unknown.add(model)
+                unknown.add(job.model)
             else:
                 hours += n * seconds / 3600
                 sources.add(source)
