@@ -2,9 +2,10 @@
 records of the first two seeds went with the machine that ran them (reports/gan_epochs_tuned: gan_sdf_tuned at
 the thesis' 40 epochs, code 332b432):
 
-  table.csv         the two-seed report (seeds 0 and 1): for n = 2 the two values of a column are
-                    mean - std/sqrt(2) and mean + std/sqrt(2) (which seed is which is lost; a pool does not need it)
-  seed<K>/runs.csv  seed K's own one-seed report (K >= 2; the report writes runs.csv since a318b35)
+  table.csv          the two-seed report (seeds 0 and 1, n = 2)
+  seed0/table.csv    seed 0's one-seed report (n = 1, written while seed 1 ran, before reports wrote runs.csv);
+                     seed 1 is then 2 × the two-seed mean − seed 0, column by column
+  seed<K>/runs.csv   seed K's own one-seed report (K >= 2; the report writes runs.csv since a318b35)
 
 usage: python -m ddfbench.report.pool_seeds reports/gan_epochs_tuned [--model gan_sdf_tuned] > .../pooled.md
 Prints a markdown table: mean ± std [95 % t interval] over the seeds (ddfbench.report.stats), and the
@@ -15,7 +16,6 @@ from __future__ import annotations
 
 import argparse
 import glob
-import math
 import os
 
 import pandas as pd
@@ -30,12 +30,21 @@ COLUMNS = [("chamfer_l2", "CD-L2 ×10³", 1e3), ("p2s_chamfer_l2", "p2s CD-L2 ×
            ("fit_s", "fit s", 1.0)]
 
 
-def two_seed_values(table: pd.DataFrame, model: str, column: str) -> list[float]:
-    """The two per-seed values behind model's row of n = 2: mean ∓ std/√2."""
-    row = table[table["model"] == model].iloc[0]
-    assert int(row["n"]) == 2, "the two-seed table must hold n = 2"
-    mean, std = float(row[f"{column}_mean"]), float(row[f"{column}_std"])
-    return [mean - std / math.sqrt(2), mean + std / math.sqrt(2)]
+def _table_row(path: str, model: str, n: int) -> pd.Series:
+    table = pd.read_csv(path)
+    rows = table[table["model"] == model]
+    assert len(rows) == 1 and int(rows.iloc[0]["n"]) == n, f"{path} must hold one row of {model} with n = {n}"
+    return rows.iloc[0]
+
+
+def first_two_seeds(folder: str, model: str) -> list[dict[str, float]]:
+    """Seeds 0 and 1, {column: value} each: seed 0 from seed0/table.csv, seed 1 = 2 × the pair's mean − seed 0."""
+    pair = _table_row(os.path.join(folder, "table.csv"), model, 2)
+    path = os.path.join(folder, "seed0", "table.csv")
+    first = _table_row(path, model, 1)
+    assert str(first["keys"]) in str(pair["keys"]).split(), f"{path}: its run is not one of table.csv's two"
+    seed0 = {column: float(first[f"{column}_mean"]) for column, _, _ in COLUMNS}
+    return [seed0, {column: 2 * float(pair[f"{column}_mean"]) - seed0[column] for column, _, _ in COLUMNS}]
 
 
 def later_seeds(folder: str, model: str) -> list[pd.Series]:
@@ -52,28 +61,26 @@ def later_seeds(folder: str, model: str) -> list[pd.Series]:
 
 
 def pooled_table(folder: str, model: str, title: str) -> str:
-    """The markdown table: a title line, then per column mean ± std [interval], seeds 0-1 and each later seed."""
-    table = pd.read_csv(os.path.join(folder, "table.csv"))
+    """The markdown table: a title line, then per column mean ± std [interval] and each seed's value."""
     later = later_seeds(folder, model)
-    names = [f"seed {int(row['seed'])}" for row in later]
-    n = 2 + len(later)
-    lines = [f"# {model}{title}: seeds 0-1 and {', '.join(str(int(r['seed'])) for r in later)} pooled "
-             "(ddfbench.report.pool_seeds)\n"]
-    lines.append(f"| metric | mean ± std [95 % t interval], n = {n} | seeds 0-1, low and high (from table.csv) | "
-                 + " | ".join(names) + " |")
-    lines.append("|---|---|---|" + "---|" * len(later))
+    seeds = first_two_seeds(folder, model) + [dict(row) for row in later]
+    numbers = [0, 1] + [int(row["seed"]) for row in later]
+    lines = [f"# {model}{title}: seeds {', '.join(map(str, numbers))} pooled (ddfbench.report.pool_seeds; seed 1 "
+             "is 2 × the two-seed mean − seed 0)\n",
+             f"| metric | mean ± std [95 % t interval], n = {len(seeds)} | "
+             + " | ".join(f"seed {k}" for k in numbers) + " |",
+             "|---|---|" + "---|" * len(seeds)]
     for column, label, scale in COLUMNS:
-        pair = [v * scale for v in two_seed_values(table, model, column)]
-        rest = [float(row[column]) * scale for row in later]
-        s = summarize_values(pair + rest)
+        values = [float(seed[column]) * scale for seed in seeds]
+        s = summarize_values(values)
         lines.append(f"| {label} | {s.mean:.4g} ± {s.std:.2g} [{s.lo:.4g}, {s.hi:.4g}] | "
-                     f"{pair[0]:.4g}, {pair[1]:.4g} | " + " | ".join(f"{v:.4g}" for v in rest) + " |")
+                     + " | ".join(f"{v:.4g}" for v in values) + " |")
     return "\n".join(lines) + "\n"
 
 
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(prog="python -m ddfbench.report.pool_seeds", description=__doc__.split("\n")[0])
-    parser.add_argument("folder", help="report folder with table.csv (seeds 0-1) and seed<K>/runs.csv")
+    parser.add_argument("folder", help="report folder with table.csv (seeds 0-1), seed0/table.csv and seed<K>/runs.csv")
     parser.add_argument("--model", default="gan_sdf_tuned")
     parser.add_argument("--title", default=" at 40 epochs on the bunny (code 332b432)",
                         help="words after the model in the title")
