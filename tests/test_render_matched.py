@@ -66,6 +66,22 @@ def test_sizes_are_compared_only_with_their_own_size():
     assert set(df["size"]) == {"64x64"}
 
 
+def test_the_command_reads_committed_compact_records_and_writes_only_with_out(tmp_path, capsys):
+    from ddfbench.report import compact
+    recs = [{**r, "key": f"{r['model']}-{i}",
+             "experiment": "render_matched" if r["family"] == "neural_sdf" else "render_time"}
+            for i, r in enumerate(records(sdf_loose_error=5e-3))]
+    time_file, matched_file = tmp_path / "rt.jsonl.gz", tmp_path / "rm.jsonl.gz"
+    compact.write_compact([r for r in recs if r["experiment"] == "render_time"], str(time_file))
+    compact.write_compact([r for r in recs if r["experiment"] == "render_matched"], str(matched_file))
+    assert matched.main([str(time_file), str(matched_file)]) == 0
+    assert 'neural_sdf {"eps_abs": 0.001}' in capsys.readouterr().out and not list(tmp_path.glob("matched.*"))
+    assert matched.main([str(time_file), str(matched_file), "--out", str(tmp_path / "out")]) == 0
+    table = (tmp_path / "out" / "matched.csv").read_text()
+    assert 'neural_sdf {""eps_abs"": 0.001}' in table and "mesh_lod500" not in table  # the full mesh matches
+    assert matched.main([str(tmp_path / "none.jsonl.gz")]) == 2
+
+
 @pytest.mark.slow
 def test_render_matched_grid_sweeps_tracer_settings_of_the_sdf_families():
     from ddfbench.report.status import expected_grid

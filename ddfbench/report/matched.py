@@ -1,6 +1,8 @@
 """Render speed at matched depth error: each family's fastest setting that is at least as accurate as the DDF.
 
-`python -m ddfbench.report.matched results/render_time results/render_matched [--out reports/render_matched]`
+`python -m ddfbench.report.matched RENDER_TIME RENDER_MATCHED [--out DIR]` (folders of run records or the reports'
+compact records, e.g. reports/render_time/records.jsonl.gz reports/render_matched/records.jsonl.gz): the table on
+stdout, and with --out also DIR/matched.md and DIR/matched.csv.
 
 A family's settings are its rows: sphere-tracer settings (model.trace: eps, eps_abs, omega) for the SDF
 families, the mesh LODs for the mesh family. Per shape and image size, against every reference (the
@@ -21,8 +23,8 @@ from typing import Any, Iterable
 
 import pandas as pd
 
+from ddfbench.report import compact
 from ddfbench.report.stats import summarize_values
-from ddfbench.run.runs import find_records
 
 REFERENCE = "ddf_tuned"  # the DDF that render_time runs (its tuned preset); tests check it is a member
 ERROR, SPEED = ("metrics", "depth_mae"), ("cost", "render_warm_s")
@@ -119,20 +121,22 @@ def to_markdown(df: pd.DataFrame) -> str:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m ddfbench.report.matched", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("records", nargs="+", help="folders of run records (render_time, render_matched)")
-    parser.add_argument("--out", default=os.path.join("reports", "render_matched"))
+    parser.add_argument("records", nargs="+",
+                        help=f"folders of run records or compact files ({compact.FILE}): render_time, render_matched")
+    parser.add_argument("--out", help="folder for matched.md and matched.csv (default: print only)")
     args = parser.parse_args(argv)
-    missing = [d for d in args.records if not os.path.isdir(d)]
+    missing = [d for d in args.records if not (os.path.isdir(d) or (d.endswith(".jsonl.gz") and os.path.isfile(d)))]
     if missing:
-        print(f"ddfbench.report.matched: {', '.join(missing)}: no such folder of run records", file=sys.stderr)
+        print(f"ddfbench.report.matched: {', '.join(missing)}: no folder of run records or {compact.FILE} file",
+              file=sys.stderr)
         return 2
-    records = [r for d in args.records for r in find_records(d)]
-    df = matched_table(records)
-    os.makedirs(args.out, exist_ok=True)
+    df = matched_table([r for source in args.records for r in compact.load_records(source)])
     md = to_markdown(df)
-    with open(os.path.join(args.out, "table.md"), "w") as fh:
-        fh.write(md)
-    df.to_csv(os.path.join(args.out, "table.csv"), index=False)
+    if args.out:
+        os.makedirs(args.out, exist_ok=True)
+        with open(os.path.join(args.out, "matched.md"), "w") as fh:
+            fh.write(md)
+        df.to_csv(os.path.join(args.out, "matched.csv"), index=False)
     print(md)
     return 0
 

@@ -14,8 +14,8 @@ Regenerates the committed reports: for each experiment (default: tune, ablation,
 storage, render_time, render_shapes, render_matched, pareto, convergence, paper_ddf) runs `python -m ddfbench +experiment=<e> out_dir=<results> [OVERRIDE ...]`
 (tune: once per model that declares a search space, report by ddfbench.report.tune)
 (finished runs are skipped, so an interrupted regeneration resumes), then writes
-`python -m ddfbench.report <results>/<e> --out <reports>/<e>` (render_matched: `python -m
-ddfbench.report.matched <results>/render_time <results>/render_matched --out <reports>/render_matched`). With overrides the report's first line
+`python -m ddfbench.report <results>/<e> --out <reports>/<e>` (render_matched's comparison at matched depth error with
+render_time's DDF is a row of claims.md, ddfbench.report.matched). With overrides the report's first line
 says "reduced budget: <overrides>" (or --note), so a report of a scaled run says how it was scaled.
 The wall time of each sweep is printed and written to <reports>/<e>/wall_time.txt. Last, the paper
 claims table <reports>/claims.md is rebuilt from every experiment's records (ddfbench.report.claims).
@@ -37,7 +37,7 @@ import time
 
 from ddfbench.core import plugins
 from ddfbench.fit import tune
-from ddfbench.report import compact, index, matched, shape_suite, verdict
+from ddfbench.report import compact, index, shape_suite, verdict
 from ddfbench.report import tune as tune_report
 from ddfbench.report.__main__ import OPTIONS_FILE, STATUS_FILE, MixedCommits, write_report
 from ddfbench.report.claims import write_claims, write_committed_claims
@@ -70,9 +70,7 @@ def regenerate(experiment: str, results: str, reports: str, overrides: list[str]
     out = os.path.join(reports, experiment)
     if overrides and note is None:
         note = "reduced budget: " + " ".join(overrides)
-    if experiment == "render_matched":  # its table sets the DDF's render_time rows beside the tracer settings
-        rc = max(rc, matched.main([os.path.join(results, "render_time"), os.path.join(results, experiment), "--out", out]))
-    elif experiment == tune.EXPERIMENT:
+    if experiment == tune.EXPERIMENT:
         rc = max(rc, tune_report.main([os.path.join(results, experiment), "--out", out]))
     else:
         try:
