@@ -346,7 +346,7 @@ def test_the_storage_order_counts_only_a_g_that_gave_a_mesh_and_names_a_smaller_
     lod = rec("storage", "mesh_lod500", 0, 4e-5, cost={"storage_bytes": 9.7e3}, family="mesh")
     row = {c.claim: c for c in claims.evaluate({"storage": storage(50e3) + [empty_g, lod]})}["G < mesh < grid SDF in storage"]
     assert row.verdict == claims.CONFIRMED and "G 50.0 kB" in row.measured  # the empty G's 30 kB is not G's size
-    assert "smallest mesh LOD is 9.7 kB, below G" in row.measured and "1 G runs gave no mesh" in row.measured
+    assert "smallest mesh LOD is 9.7 kB, below G" in row.measured and "1 G runs gave no mesh or one off the shape" in row.measured
     (only_empty,) = [c for c in claims.evaluate({"storage": storage(50e3)[1:] + [empty_g]})
                      if c.claim == "G < mesh < grid SDF in storage"]
     assert only_empty.verdict == claims.NOT_CONVERGED

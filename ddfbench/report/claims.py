@@ -579,7 +579,7 @@ def thesis_storage(records: Records) -> list[Claim]:
         Claim("G < mesh < grid SDF in storage", src, paper,
               f"G {g / 1e3:.1f} kB, mesh {mesh / 1e3:.0f} kB, grid SDF {grid / 1e3:.0f} kB"
               + (f"; but the smallest mesh LOD is {smallest_mesh / 1e3:.1f} kB, below G" if smallest_mesh < g else "")
-              + (f"; {untrained} G runs gave no mesh and are left out" if untrained else ""),
+              + (f"; {untrained} G runs gave no mesh or one off the shape and are left out" if untrained else ""),
               f"`{recs[0].get('experiment')}`: gan_sdf (runs that gave a mesh), mesh (full and LODs), grid_sdf "
               "(largest)", (CONFIRMED if all(order) else REFUTED) if order else
               (NOT_CONVERGED if untrained and not math.isfinite(g) else NO_RECORDS), conv),
