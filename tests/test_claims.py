@@ -249,7 +249,7 @@ def render_matched(loose_warm_s, device="cuda"):
     for s in SEEDS:
         r = rec("render_matched", claims.SDF, s, 1e-4, scene={"width": 64, "height": 64}, family="neural_sdf",
                 cost={"render_warm_s": loose_warm_s}, device=device)
-        r["metrics"]["depth_mae"], r["config"]["model"] = 0.015, {"trace": {"eps_abs": 3e-3}}
+        r["metrics"]["depth_mae"], r["overrides"] = 0.015, ["++model.trace.eps_abs=3e-3"]
         out.append(r)
     return out
 

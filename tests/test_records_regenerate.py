@@ -32,11 +32,18 @@ def test_the_compact_file_round_trips_and_is_deterministic(results, tmp_path):
     records = compact.load_records(str(results))
     first = compact.write_compact(records, str(tmp_path / "a.jsonl.gz"))
     again = compact.read_compact(first)
-    assert [{k: v for k, v in r.items() if k != "_dir"} for r in sorted(records, key=lambda r: r["key"])] == \
+    assert [compact.portable(r) for r in sorted(records, key=lambda r: r["key"])] == \
         [{k: v for k, v in r.items() if k != "_dir"} for r in again]
     assert all(r["_dir"] is None for r in again)
     second = compact.write_compact(list(reversed(again)), str(tmp_path / "b.jsonl.gz"))
     assert open(first, "rb").read() == open(second, "rb").read()
+
+
+def test_the_compact_file_writes_the_machines_out_dir_as_a_placeholder(results, tmp_path):
+    record = {**compact.load_records(str(results))[0], "overrides": ["seed=0", "out_dir=/work/res/x", "shape=cube"]}
+    path = compact.write_compact([record], str(tmp_path / "a.jsonl.gz"))
+    assert compact.read_compact(path)[0]["overrides"] == ["seed=0", "out_dir=<out_dir>", "shape=cube"]
+    assert "/work/res" not in gzip.open(path, "rt").read()
 
 
 def test_a_line_that_is_not_a_record_is_named_and_left_out(tmp_path, capsys):
@@ -135,12 +142,14 @@ def test_the_compact_command_packs_a_folder_of_records(results, tmp_path, capsys
 
 
 def test_no_committed_report_names_a_folder_of_the_machine_that_ran_it():
-    """Reports write the records' folder as <out_dir>; a path such as /work/res/x or /tmp/x means nothing on a clone."""
+    """Reports and their compact records write the records' folder as <out_dir>; a path such as /work/res/x or /tmp/x
+    means nothing on a clone."""
     found = []
     for folder, _, files in os.walk(os.path.join(ROOT, "reports")):
         for name in files:
-            if name.endswith((".md", ".csv", ".txt", ".json", ".tex")):
-                with open(os.path.join(folder, name), encoding="utf-8", errors="replace") as fh:
+            if name.endswith((".md", ".csv", ".txt", ".json", ".tex", ".jsonl.gz")):
+                opener = gzip.open if name.endswith(".gz") else open
+                with opener(os.path.join(folder, name), "rt", encoding="utf-8", errors="replace") as fh:
                     text = fh.read()
                 found += [f"{os.path.relpath(os.path.join(folder, name), ROOT)}: {marker}"
                           for marker in ("/work/", "/tmp/", "/home/", "/root/") if marker in text]

@@ -8,9 +8,14 @@ from ddfbench.report import matched
 
 
 def rec(model, family, depth_mae, warm_s, seed=0, trace=None, width=64):
-    cfg = {"seed": seed, "model": {"family": family, **({"trace": trace} if trace else {})}}
+    """A render record; an SDF preset carries its whole tracer in its config (as grid_sdf's does), a swept setting
+    is its `++model.trace.*` overrides."""
+    preset_trace = {"eps": 1e-5, "eps_abs": 1e-6, "omega": 1.0, "max_steps": 256} if "sdf" in family else {}
+    model_cfg = {"family": family, **({"trace": {**preset_trace, **(trace or {})}} if preset_trace else {})}
+    cfg = {"seed": seed, "model": model_cfg}
     return {"status": "ok", "model": model, "family": family, "shape": {"name": "bunny"},
             "scene": {"width": width, "height": width}, "config": cfg,
+            "overrides": [f"seed={seed}", *(f"++model.trace.{k}={v}" for k, v in (trace or {}).items())],
             "metrics": {"depth_mae": depth_mae}, "cost": {"render_warm_s": warm_s}}
 
 
@@ -66,7 +71,7 @@ def test_sizes_are_compared_only_with_their_own_size():
     assert set(df["size"]) == {"64x64"}
 
 
-def test_the_command_reads_committed_compact_records_and_writes_only_with_out(tmp_path, capsys):
+def test_the_command_reads_committed_compact_records_and_writes_only_with_out(tmp_path, capsys, monkeypatch):
     from ddfbench.report import compact
     recs = [{**r, "key": f"{r['model']}-{i}",
              "experiment": "render_matched" if r["family"] == "neural_sdf" else "render_time"}
@@ -74,8 +79,10 @@ def test_the_command_reads_committed_compact_records_and_writes_only_with_out(tm
     time_file, matched_file = tmp_path / "rt.jsonl.gz", tmp_path / "rm.jsonl.gz"
     compact.write_compact([r for r in recs if r["experiment"] == "render_time"], str(time_file))
     compact.write_compact([r for r in recs if r["experiment"] == "render_matched"], str(matched_file))
+    monkeypatch.chdir(tmp_path)  # without --out nothing is written, here or below (it once wrote reports/...)
     assert matched.main([str(time_file), str(matched_file)]) == 0
-    assert 'neural_sdf {"eps_abs": 0.001}' in capsys.readouterr().out and not list(tmp_path.glob("matched.*"))
+    assert 'neural_sdf {"eps_abs": 0.001}' in capsys.readouterr().out
+    assert sorted(p.name for p in tmp_path.rglob("*")) == ["rm.jsonl.gz", "rt.jsonl.gz"]
     assert matched.main([str(time_file), str(matched_file), "--out", str(tmp_path / "out")]) == 0
     table = (tmp_path / "out" / "matched.csv").read_text()
     assert 'neural_sdf {""eps_abs"": 0.001}' in table and "mesh_lod500" not in table  # the full mesh matches

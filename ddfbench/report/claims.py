@@ -430,25 +430,26 @@ def renders_faster(records: Records) -> list[Claim]:
 
 def renders_faster_matched(records: Records) -> list[Claim]:
     """The same claim with each family at its fastest setting as accurate in depth as the DDF."""
-    src, paper = "DDF Fig. 5, §VII", "DDF renders faster than BVH meshes and SDFs, on an RTX 3090"
+    name, src, paper = ("DDF renders faster at matched depth error", "DDF Fig. 5, §VII",
+                        "DDF renders faster than BVH meshes and SDFs, on an RTX 3090")
     if not ok_records(records.get("render_matched") or []):
-        return [_missing("DDF faster at matched depth error", src, paper, "render_matched")]
+        return [_missing(name, src, paper, "render_matched")]
     gpu = _on_gpu(ok_records(records.get("render_time") or []) + ok_records(records["render_matched"]))
     table = matched.matched_table(ok_records(records.get("render_time") or []) + ok_records(records["render_matched"]))
     if table.empty:
-        return [_missing("DDF faster at matched depth error", src, paper, "render_time")]
+        return [_missing(name, src, paper, "render_time")]
     # only the image sizes the tracer settings were swept at: elsewhere a row holds the defaults alone
     swept = {f"{(r.get('scene') or {}).get('width')}x{(r.get('scene') or {}).get('height')}"
              for r in ok_records(records["render_matched"])}
     table = table[table["size"].isin(swept)]
     if table.empty:
-        return [_missing("DDF faster at matched depth error", src, paper, "render_matched")]
+        return [_missing(name, src, paper, "render_matched")]
     largest = table[table["size"] == max(table["size"], key=lambda s: int(str(s).split("x")[0]))]
     parts = [f"{r['shape']} {r['size']} {r['family']}: {r['matched_speedup']:.3g}× the DDF's time"
              + ("" if r["matched_reached"] else " (not as accurate at any setting)") for _, r in largest.iterrows()]
     faster = [bool(r["matched_speedup"] > 1) for _, r in largest.iterrows() if r["matched_reached"]]
     verdict = NOT_TESTABLE if not gpu else (CONFIRMED if faster and all(faster) else REFUTED if faster else NOT_SEPARABLE)
-    return [Claim("DDF renders faster at matched depth error", src, paper, "; ".join(parts),
+    return [Claim(name, src, paper, "; ".join(parts),
                   "`render_matched` + `render_time` (report.matched), the largest image size the tracer settings "
                   "were swept at", verdict,
                   ("" if gpu else "CPU records: the claim is about a GPU. ") + "Means over seeds, no interval: each "

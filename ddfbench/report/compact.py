@@ -2,7 +2,8 @@
 (records.jsonl.gz), so that the report regenerates from the repository alone, on a fresh clone, running no fit.
 
 A compact record is the record.json as written (metrics, costs, fit curves and probes, config, environment), less
-the run folder it was read from; the run folder's artifacts (meshes, renders, the model) stay behind, so what
+the run folder it was read from and with the machine's folder in its `out_dir=` override written as `<out_dir>` (as
+the reports write it: a path of the machine that ran it means nothing on a clone); the run folder's artifacts (meshes, renders, the model) stay behind, so what
 needs them (the gallery, the re-measuring tools) is not rebuilt from this file. The file is deterministic: the
 records sorted by (experiment, key), keys sorted, gzip's timestamp 0, so one set of records gives one file.
 
@@ -20,11 +21,21 @@ from typing import Any
 from ddfbench.run.runs import find_records, record_problem
 
 FILE = "records.jsonl.gz"
+OUT_DIR = "out_dir="
+
+
+def portable(rec: dict[str, Any]) -> dict[str, Any]:
+    """The record less its run folder (`_dir`), its `out_dir=` override written as `out_dir=<out_dir>`."""
+    row = {k: v for k, v in rec.items() if k != "_dir"}
+    if isinstance(row.get("overrides"), list):
+        row["overrides"] = [f"{OUT_DIR}<out_dir>" if isinstance(o, str) and o.startswith(OUT_DIR) else o
+                            for o in row["overrides"]]
+    return row
 
 
 def write_compact(records: list[dict[str, Any]], path: str) -> str:
     """Write the records (as find_records or read_compact give them) to path; return path."""
-    rows = sorted(({k: v for k, v in r.items() if k != "_dir"} for r in records),
+    rows = sorted((portable(r) for r in records),
                   key=lambda r: (str(r.get("experiment")), str(r.get("key"))))
     with open(path, "wb") as raw, gzip.GzipFile(filename="", mode="wb", fileobj=raw, mtime=0) as fh:
         for row in rows:

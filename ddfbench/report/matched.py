@@ -6,8 +6,8 @@ stdout, and with --out also DIR/matched.md and DIR/matched.csv.
 
 A family's settings are its rows: sphere-tracer settings (model.trace: eps, eps_abs, omega) for the SDF
 families, the mesh LODs for the mesh family. Per shape and image size, against every reference (the
-`ddf` model) row, a family's matched setting is its fastest (lowest mean warm render time) whose mean
-depth error is at most the reference's; the default setting (untouched tracer, full mesh) stands beside
+`ddf_tuned` model) row, a family's matched setting is its fastest (lowest mean warm render time) whose mean
+depth error is at most the reference's; the default setting (no tracer override, full mesh) stands beside
 it. Speed-up = the setting's warm render time / the reference's (> 1: the DDF renders faster).
 Means over seeds with n; depth error in normalized units (×10³ in the table), warm time in seconds.
 """
@@ -31,14 +31,29 @@ ERROR, SPEED = ("metrics", "depth_mae"), ("cost", "render_warm_s")
 NOT_REACHED = "not reached"
 
 
-def _value(rec: dict[str, Any], path: tuple[str, str]) -> float:
+def _measure(rec: dict[str, Any], path: tuple[str, str]) -> float:
     v = (rec.get(path[0]) or {}).get(path[1])
     return float(v) if isinstance(v, (int, float)) else math.nan
 
 
+TRACE = "model.trace."  # the overrides a tracer sweep sets (render_matched: ++model.trace.eps_abs=..., omega)
+
+
+def _parsed(text: str) -> Any:
+    try:
+        return float(text)
+    except ValueError:
+        return text
+
+
 def setting_label(rec: dict[str, Any]) -> str:
-    """What distinguishes a row inside its family: the model name and its non-default tracer keys."""
-    trace = ((rec.get("config") or {}).get("model") or {}).get("trace") or {}
+    """What distinguishes a row inside its family: the model name and the tracer keys its sweep set (its
+    `model.trace.*` overrides; the trace block a preset carries in its config is that preset's default)."""
+    trace = {}
+    for override in rec.get("overrides") or []:
+        key, _, value = str(override).lstrip("+").partition("=")
+        if key.startswith(TRACE):
+            trace[key[len(TRACE):]] = _parsed(value)
     return f"{rec.get('model')} {json.dumps(trace, sort_keys=True)}" if trace else str(rec.get("model"))
 
 
@@ -58,7 +73,7 @@ def settings_table(records: Iterable[dict[str, Any]]) -> pd.DataFrame:
                # the untouched tracer of the preset that was run; of the mesh, the full mesh (LODs are settings)
                "default": setting == model and (family != "mesh" or model == "mesh")}
         for name, path in (("depth_mae", ERROR), ("render_warm_s", SPEED)):
-            s = summarize_values(_value(r, path) for r in recs)
+            s = summarize_values(_measure(r, path) for r in recs)
             row.update({f"{name}_mean": s.mean, f"{name}_std": s.std, f"{name}_ci_lo": s.lo,
                         f"{name}_ci_hi": s.hi, f"{name}_n": s.n})
         rows.append(row)
@@ -122,12 +137,12 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m ddfbench.report.matched", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("records", nargs="+",
-                        help=f"folders of run records or compact files ({compact.FILE}): render_time, render_matched")
+                        help="folders of run records or compact records (*.jsonl.gz): render_time, render_matched")
     parser.add_argument("--out", help="folder for matched.md and matched.csv (default: print only)")
     args = parser.parse_args(argv)
     missing = [d for d in args.records if not (os.path.isdir(d) or (d.endswith(".jsonl.gz") and os.path.isfile(d)))]
     if missing:
-        print(f"ddfbench.report.matched: {', '.join(missing)}: no folder of run records or {compact.FILE} file",
+        print(f"ddfbench.report.matched: {', '.join(missing)}: no folder of run records or .jsonl.gz file",
               file=sys.stderr)
         return 2
     df = matched_table([r for source in args.records for r in compact.load_records(source)])

@@ -16,10 +16,13 @@ from __future__ import annotations
 
 import argparse
 import glob
+import math
 import os
+import sys
 
 import pandas as pd
 
+from ddfbench.core.errors import InputError
 from ddfbench.report.stats import summarize_values
 
 # (column, label, scale)
@@ -33,29 +36,37 @@ COLUMNS = [("chamfer_l2", "CD-L2 ×10³", 1e3), ("p2s_chamfer_l2", "p2s CD-L2 ×
 def _table_row(path: str, model: str, n: int) -> pd.Series:
     table = pd.read_csv(path)
     rows = table[table["model"] == model]
-    assert len(rows) == 1 and int(rows.iloc[0]["n"]) == n, f"{path} must hold one row of {model} with n = {n}"
+    if len(rows) != 1 or int(rows.iloc[0]["n"]) != n:
+        raise InputError(f"{path}: must hold one row of {model} with n = {n}")
     return rows.iloc[0]
 
 
 def first_two_seeds(folder: str, model: str) -> list[dict[str, float]]:
-    """Seeds 0 and 1, {column: value} each: seed 0 from seed0/table.csv, seed 1 = 2 × the pair's mean − seed 0."""
+    """Seeds 0 and 1, {column: value} each: seed 0 from seed0/table.csv, seed 1 = 2 × the pair's mean − seed 0.
+    Seed 0 must be one of the pair's runs (by key) and lie std/√2 from the pair's mean in every column."""
     pair = _table_row(os.path.join(folder, "table.csv"), model, 2)
     path = os.path.join(folder, "seed0", "table.csv")
     first = _table_row(path, model, 1)
-    assert str(first["keys"]) in str(pair["keys"]).split(), f"{path}: its run is not one of table.csv's two"
+    if str(first["keys"]) not in str(pair["keys"]).split():
+        raise InputError(f"{path}: its run {first['keys']} is not one of table.csv's two ({pair['keys']})")
     seed0 = {column: float(first[f"{column}_mean"]) for column, _, _ in COLUMNS}
+    off = [column for column, _, _ in COLUMNS if not math.isclose(
+        abs(seed0[column] - float(pair[f"{column}_mean"])), float(pair[f"{column}_std"]) / math.sqrt(2),
+        rel_tol=1e-6, abs_tol=1e-12)]
+    if off:
+        raise InputError(f"{path}: {', '.join(off)} not std/√2 from table.csv's two-seed mean")
     return [seed0, {column: 2 * float(pair[f"{column}_mean"]) - seed0[column] for column, _, _ in COLUMNS}]
 
 
 def later_seeds(folder: str, model: str) -> list[pd.Series]:
-    """Each seed<K>/ report's one finished run of model, in seed order."""
+    """Each seed<K>/ report's one finished run of model (K >= 2), in seed order."""
     rows = []
     for path in glob.glob(os.path.join(folder, "seed*", "runs.csv")):
         runs = pd.read_csv(path)
         runs = runs[(runs["model"] == model) & (runs["status"] == "ok")]
-        folder = os.path.basename(os.path.dirname(path))
-        assert len(runs) == 1 and folder == f"seed{int(runs.iloc[0]['seed'])}", \
-            f"{path} must hold one finished run of the seed its folder names"
+        name = os.path.basename(os.path.dirname(path))
+        if len(runs) != 1 or name != f"seed{int(runs.iloc[0]['seed'])}" or int(runs.iloc[0]["seed"]) < 2:
+            raise InputError(f"{path}: must hold one finished run of the seed its folder names, 2 or above")
         rows.append(runs.iloc[0])
     return sorted(rows, key=lambda row: int(row["seed"]))
 
@@ -78,15 +89,20 @@ def pooled_table(folder: str, model: str, title: str) -> str:
     return "\n".join(lines) + "\n"
 
 
-def main(argv: list[str] | None = None) -> None:
+def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m ddfbench.report.pool_seeds", description=__doc__.split("\n")[0])
     parser.add_argument("folder", help="report folder with table.csv (seeds 0-1), seed0/table.csv and seed<K>/runs.csv")
     parser.add_argument("--model", default="gan_sdf_tuned")
     parser.add_argument("--title", default=" at 40 epochs on the bunny (code 332b432)",
                         help="words after the model in the title")
     args = parser.parse_args(argv)
-    print(pooled_table(args.folder, args.model, args.title), end="")
+    try:
+        print(pooled_table(args.folder, args.model, args.title), end="")
+    except InputError as exc:
+        print(f"ddfbench.report.pool_seeds: {exc}", file=sys.stderr)
+        return 2
+    return 0
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(main())
