@@ -86,6 +86,16 @@ def test_probe_rows_are_each_ok_runs_probes_in_seed_and_step_order_with_their_ep
     assert "| gan_sdf | bunny | 1 | 1 | 0.5 | 50 | 0.4 | 0.996 |" in convergence.probe_markdown(rows)
 
 
+def test_probe_columns_keep_one_order_whatever_the_records_key_order():
+    """A compact record's keys are sorted, a record.json's are as written: probes.csv must not follow either."""
+    written = run("gan_sdf", "bunny", 0, [(9.0, 3e-3)])
+    probe = written["fit"]["probes"][0]
+    shuffled = {**written, "fit": {**written["fit"], "probes": [dict(sorted(probe.items(), reverse=True))]}}
+    columns = [list(convergence.probe_rows([r])[0]) for r in (written, shuffled)]
+    assert columns[0] == columns[1]
+    assert columns[0][6:8] == ["seconds", "chamfer_l2"]  # after model, shape, seed, key, step, epoch
+
+
 @pytest.mark.slow  # expands the sweep (~0.2 s a job)
 def test_the_convergence_sweep_is_every_learned_family_on_bunny_and_bone_with_three_seeds():
     from ddfbench.core import plugins

@@ -103,6 +103,12 @@ def to_markdown(rows: list[dict[str, Any]]) -> str:
     return "\n".join(lines) + "\n"
 
 
+def _probe_column(key: str) -> tuple[bool, bool, str]:
+    """The order of a probe's columns, whatever the record's key order (a compact record's keys are sorted):
+    seconds, chamfer_l2, then the others by name (fscore@r by radius)."""
+    return key != "seconds", key != "chamfer_l2", key
+
+
 def probe_rows(records: list[Record]) -> list[dict[str, Any]]:
     """One row per probe of every ok run, ordered by model, shape, seed and step: model, shape, seed, key,
     step, epoch (step x the fit's epochs / steps; NaN where the record has no epoch count), seconds of
@@ -116,7 +122,7 @@ def probe_rows(records: list[Record]) -> list[dict[str, Any]]:
             rows.append({"model": str(r.get("model")), "shape": shape_name(r),
                          "seed": int((r.get("config") or {}).get("seed", 0)), "key": r.get("key"), "step": step,
                          "epoch": step * epochs / steps if steps > 0 else math.nan,
-                         **{k: v for k, v in p.items() if k != "step"}})
+                         **{k: p[k] for k in sorted((k for k in p if k != "step"), key=_probe_column)}})
     return sorted(rows, key=lambda x: (x["model"], x["shape"], x["seed"], str(x["key"]), x["step"]))
 
 
