@@ -3,8 +3,9 @@
 
 A compact record is the record.json as written (metrics, costs, fit curves and probes, config, environment), less
 the run folder it was read from and with the machine's folder in its `out_dir=` override written as `<out_dir>` (as
-the reports write it: a path of the machine that ran it means nothing on a clone); the run folder's artifacts (meshes, renders, the model) stay behind, so what
-needs them (the gallery, the re-measuring tools) is not rebuilt from this file. The file is deterministic: the
+the reports write it: a path of the machine that ran it means nothing on a clone); the run folder's artifacts
+(meshes, renders, the model) stay behind, so what needs them (the gallery, the re-measuring tools) is not rebuilt
+from this file. The file is deterministic: the
 records sorted by (experiment, key), keys sorted, gzip's timestamp 0, so one set of records gives one file.
 
 `python -m ddfbench.report.compact RESULTS/<experiment> OUT.jsonl.gz` writes one from a folder of run records.

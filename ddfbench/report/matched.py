@@ -25,6 +25,7 @@ import pandas as pd
 
 from ddfbench.report import compact
 from ddfbench.report.stats import summarize_values
+from ddfbench.report.tables import override_labels
 
 REFERENCE = "ddf_tuned"  # the DDF that render_time runs (its tuned preset); tests check it is a member
 ERROR, SPEED = ("metrics", "depth_mae"), ("cost", "render_warm_s")
@@ -49,11 +50,8 @@ def _parsed(text: str) -> Any:
 def setting_label(rec: dict[str, Any]) -> str:
     """What distinguishes a row inside its family: the model name and the tracer keys its sweep set (its
     `model.trace.*` overrides; the trace block a preset carries in its config is that preset's default)."""
-    trace = {}
-    for override in rec.get("overrides") or []:
-        key, _, value = str(override).lstrip("+").partition("=")
-        if key.startswith(TRACE):
-            trace[key[len(TRACE):]] = _parsed(value)
+    trace = {key[len(TRACE):]: _parsed(value) for key, value in override_labels(rec.get("overrides") or []).items()
+             if key.startswith(TRACE)}
     return f"{rec.get('model')} {json.dumps(trace, sort_keys=True)}" if trace else str(rec.get("model"))
 
 
