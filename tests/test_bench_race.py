@@ -31,6 +31,13 @@ def test_race_runs_every_contestant_on_both_ray_sets(race):
         assert d["warp_bvh"]["mask_iou"] == 1.0 and d["warp_bvh"]["depth_mae"] < 1e-5
         assert d["embree_all_cores"]["mask_iou"] == 1.0 and d["embree_all_cores"]["depth_mae"] == 0.0
         assert sec["details"]["embree_all_cores"].startswith("open3d") and sec["details"]["reference"] == "open3d oracle"
+        for name in ("neural_sdf_device_fp32", "neural_sdf_device_bf16", "grid_sdf_device_fp32"):  # the resident tracer
+            assert d[name]["rays_per_s"] > 0 and 0.0 <= d[name]["mask_iou"] <= 1.0, (set_name, name)
+        # the grid traced on the device finds what the numpy loop finds on the same grid
+        assert abs(d["grid_sdf_device_fp32"]["mask_iou"] - d["grid_sdf_trace"]["mask_iou"]) < 0.02
+        assert d["fastest"]["ddf"] in ("ddf_fp32", "ddf_bf16") and d["fastest"]["grid_sdf"] == "grid_sdf_device_fp32"
+        assert any(r["measure"].startswith(f"{set_name}: neural_sdf device tracer") and "numpy in and out" in r["reference"]
+                   for r in sec["rows"])
         diff = d["ddf_bf16_vs_fp32_depth_diff"]
         assert math.isfinite(diff["depth_mae"]) and 0.0 <= diff["mask_disagreement"] <= 1.0
     assert all(math.isfinite(r["ratio"]) and r["ratio"] > 0 for r in sec["rows"])
@@ -44,6 +51,15 @@ def test_race_sweep_and_capacities(race):
     caps = sec["details"]["capacities"]
     assert list(caps) == ["c1", "c2", "c3", "c4"]
     assert [caps[c]["width"] for c in caps] == [64, 128, 256, 512]
+    lods = [k for k in caps["c1"] if k.startswith("mesh_lod_")]
+    assert len(lods) == 1 and int(lods[0].split("_")[-1]) <= 302  # the sizes' one LOD (300 triangles)
+    for c in caps.values():  # the BVH and the LOD raced beside every capacity, scored like it
+        assert c["warp_bvh"]["mask_iou"] == 1.0 and c["warp_bvh"]["depth_mae"] < 1e-5
+        assert c[lods[0]]["depth_mae"] > 1e-4 and c["flops_per_ray"] > 2 * c["width"] ** 2 * (c["depth"] - 1)
+    measures = [(r["measure"], r["reference"]) for r in sec["rows"] if r["measure"].startswith("capacity c3")]
+    assert {ref for _, ref in measures} == {"same network fp32 rays/s", "warp_bvh (Warp) beside it rays/s",
+                                            f"{lods[0]} (Warp) beside it rays/s"}
+    assert {"ddf_load_or_fit_s", "warp_bvh_build_s"} <= set(sec["details"]["cold"])
 
 
 

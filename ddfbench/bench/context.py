@@ -61,10 +61,18 @@ class Context:
         return self._oracles[(name, backend)]
 
     def timed_fit(self, rep: Representation, samples: Samples) -> dict[str, Any]:
-        """rep fit on samples of the sizes' shape for the sizes' fit_seconds on this device, no probes:
-        {fit_steps, fit_seconds, fit_status}."""
+        """rep fit on samples of the sizes' shape on this device, no probes: for the sizes' fit_steps when set
+        (fixed work; the lr schedule runs by steps), else for fit_seconds of wall clock.
+        Returns {fit_steps, fit_seconds, fit_status, fit_device}."""
         name = self.sizes["shape"]
+        steps = int(self.sizes.get("fit_steps") or 0)
+        seconds = float("inf") if steps else float(self.sizes["fit_seconds"])
         stats = rep.fit(FitData(samples, self.shape(name).mesh, self.oracle(name)),
-                        Budget(max_steps=10**9, max_seconds=float(self.sizes["fit_seconds"]), device=self.device,
-                               n_probes=0))
-        return {"fit_steps": stats.steps, "fit_seconds": stats.seconds, "fit_status": stats.status}
+                        Budget(max_steps=steps or 10**9, max_seconds=seconds, device=self.device, n_probes=0))
+        return {"fit_steps": stats.steps, "fit_seconds": stats.seconds, "fit_status": stats.status,
+                "fit_device": self.device}
+
+    def fit_spec(self) -> dict[str, Any]:
+        """What a fit of this section is made by (bench.prepared names saved networks by it): shape and budget."""
+        steps = int(self.sizes.get("fit_steps") or 0)
+        return {"shape": self.sizes["shape"], **({"steps": steps} if steps else {"seconds": self.sizes["fit_seconds"]})}

@@ -12,23 +12,34 @@ Contestants, all answering first-hit depth (no normals) for the same rays:
 - Embree on every CPU core, numpy rays on the host: open3d's RaycastingScene through the oracle, or with
   `--oracle-backend warp` (a machine without open3d) embreex in one process per core
   (ddfbench.truth.embree_pool); the JSON's details say which;
-- sphere tracing the neural SDF (conf/model/neural_sdf_tuned.yaml, trained `fit_seconds`) and a level-set grid SDF (`grid_resolution`),
-  through their intersect (numpy in and out: host transfers included).
-Ray sets: "primary" (one pinhole camera, `px`^2 rays) and "incoherent" (origins uniform in the field
-box, uniform directions). Then a sweep of incoherent ray counts (`sweep`: latency and throughput of the
-DDF's fastest variant, Warp and Embree) and the four DDF capacities of the Pareto sweep
-(conf/experiment/pareto.yaml, each trained `fit_seconds`) on the primary rays.
+- sphere tracing the neural SDF (conf/model/neural_sdf_tuned.yaml, trained like the DDF) and a level-set grid SDF
+  (`grid_resolution`), twice: through their intersect (numpy in and out: host transfers included; "…_trace"), and
+  through ddfbench.evaluate.trace_device.DeviceSphereTracer (rays and state on the device, a host sync only at
+  compaction; "…_device_<precision>"), so that DDF against SDF compares methods and not implementations.
+Ray sets: "primary" (one pinhole camera, `px`^2 rays, turned about the shape by `ray_seed`: bench.views.orbit_eye)
+and "incoherent" (origins uniform in the field box, uniform directions, seeded by `ray_seed`): issue 51 repeats the
+race in fresh processes with seeds 1-5 and pools the ratios (ddfbench.bench.repeats). Then a sweep of incoherent
+ray counts (`sweep`: latency and throughput of the DDF's fastest variant, Warp and Embree) and the four DDF
+capacities of the Pareto sweep (conf/experiment/pareto.yaml) on the primary rays, each beside Warp's BVH of the
+shape and of its LODs (`lods`: triangle counts) on the same rays.
+Networks fit for `fit_steps` steps when set (fixed work), else `fit_seconds` of wall clock; with `prepared` (a
+folder) they, the grid and the LODs are saved there once and loaded by later processes (ddfbench.bench.prepared).
+Cold costs (details "cold" and each contestant's cold_s): BVH builds (Warp; Embree in one process and the pool's
+start), loads, and every contestant's first call (kernel compile and autotune, Warp's module load).
 Accuracy: depth MAE on rays both the contestant and the reference hit, and mask IoU, against Embree on
 the same rays (the open3d oracle, or with `--oracle-backend warp` the embreex pool, so that warp_bvh is
 never scored against itself; Warp's own answers only where embreex is missing too, as details say). Every timed call is synchronized (ddfbench.core.clock.clock), warm-up
 excluded (ddfbench.bench.timing). Absolute figures hold for the device named in the JSON's env.
-Sizes: shape, px, incoherent_rays, sweep (ray counts), embree_max (largest sweep count Embree runs),
-fit_seconds, grid_resolution, n_samples (neural SDF samples), chunk (DDF rays per network call),
-compile (bool), capacities (bool), model / neural (overrides of the main DDF / neural SDF).
+Sizes: shape, px, incoherent_rays, ray_seed, sweep (ray counts), embree_max (largest sweep count Embree runs),
+fit_seconds, fit_steps (0: by fit_seconds), prepared (folder or null), grid_resolution, n_samples (neural SDF
+samples), chunk (DDF rays per network call), compile (bool: the DDF's torch.compile variants), sdf_compile (bool:
+the neural SDF's device tracer compiled too, CUDA), capacities (bool), lods (triangle counts),
+model / neural (overrides of the main DDF / neural SDF).
 """
 
 from __future__ import annotations
 
+import functools
 import importlib.util
 import os
 from typing import Callable
@@ -36,17 +47,23 @@ from typing import Callable
 import numpy as np
 import torch
 
+from ddfbench.bench import prepared
 from ddfbench.bench.context import Context, model_preset, preset
 from ddfbench.bench.ddf import bare_forward
 from ddfbench.bench.results import SectionResult, Target, compare
 from ddfbench.bench.timing import Timing, measure_side_by_side
 from ddfbench.bench.tracing import grid_sdf, neural_sdf
-from ddfbench.bench.views import incoherent_rays, view_rays
+from ddfbench.bench.views import incoherent_rays, orbit_eye, view_rays
 from ddfbench.core import plugins
-from ddfbench.core.errors import one_line
+from ddfbench.core.clock import timed
+from ddfbench.core.errors import InputError, one_line
 from ddfbench.core.geometry import box_entry
+from ddfbench.evaluate.trace_device import DeviceSphereTracer
 from ddfbench.models.ddf import DDF
 from ddfbench.models.ddf.infer import DDFDepth
+from ddfbench.models.grid_sdf import GridSDF
+from ddfbench.models.mesh import decimate
+from ddfbench.models.neural_sdf import NeuralSDF
 from ddfbench.sampling import surface
 from ddfbench.truth.embree_pool import EmbreePool
 
@@ -70,10 +87,64 @@ def pareto_ddf_capacities() -> dict[str, dict]:
     return {level: dict(part.get("model") or {}) for level, part in levels.items()}
 
 
-def train_ddf(ctx: Context, samples, overrides: dict) -> tuple[DDF, dict]:
-    """conf/model/<DDF_PRESET>.yaml with overrides, fit for the sizes' fit_seconds (Context.timed_fit)."""
-    rep = DDF(model_preset(DDF_PRESET, **overrides))
-    return rep, {**ctx.timed_fit(rep, samples), "n_params": rep.n_params(), **{k: rep.cfg[k] for k in ("width", "depth")}}
+def train_ddf(ctx: Context, samples: Callable, overrides: dict) -> tuple[DDF, dict]:
+    """conf/model/<DDF_PRESET>.yaml with overrides, fit on samples() by the sizes' budget (Context.timed_fit), or
+    loaded from the sizes' `prepared` folder; on ctx.device."""
+    fresh = DDF(model_preset(DDF_PRESET, **overrides))  # its cfg holds the family's defaults too
+
+    def make() -> tuple[DDF, dict]:
+        return fresh, {**ctx.timed_fit(fresh, samples()), "n_params": fresh.n_params(),
+                       **{k: fresh.cfg[k] for k in ("width", "depth")}}
+
+    rep, info = prepared.artifact(ctx.sizes, f"{DDF_PRESET}-{fresh.cfg['width']}x{fresh.cfg['depth']}",
+                                  {"cfg": fresh.cfg, "labels": "surface sampling, exact", **ctx.fit_spec()}, DDF, make)
+    return rep.to(ctx.device), info
+
+
+def sdf_contestants(ctx: Context) -> tuple[NeuralSDF, dict, GridSDF, dict]:
+    """The neural SDF (SDF_PRESET, the sizes' `neural` overrides, fit like the DDF) and the level-set grid SDF, made
+    or loaded from `prepared` (bench.prepared), on ctx.device: (neural, its info, grid, its info)."""
+    s = ctx.sizes
+    cfg = model_preset(SDF_PRESET, **dict(s.get("neural") or {}))
+    nsdf, n_info = prepared.artifact(s, SDF_PRESET, {"cfg": cfg, "n_samples": s["n_samples"], **ctx.fit_spec()},
+                                     NeuralSDF, lambda: neural_sdf(ctx, SDF_PRESET))
+    gsdf, g_info = prepared.artifact(s, "grid_sdf", {"cfg": model_preset("grid_sdf"), "shape": s["shape"],
+                                                     "resolution": s["grid_resolution"], "build": "levelset"},
+                                     GridSDF, lambda: grid_sdf(ctx))
+    return nsdf.to(ctx.device), n_info, gsdf.to(ctx.device), g_info
+
+
+def device_tracers(ctx: Context, nsdf: NeuralSDF, gsdf: GridSDF) -> dict[str, DeviceSphereTracer]:
+    """Both SDFs through the device-resident tracer with their presets' trace options: the neural SDF in fp32 and
+    bf16 (on CUDA also tf32, and with `sdf_compile` its step compiled in tf32), the grid in fp32 (trilinear reads)."""
+    cuda = ctx.device.startswith("cuda")
+    out = {f"neural_sdf_device_{p}": DeviceSphereTracer(nsdf.field, nsdf.domain, nsdf.trace_options, precision=p)
+           for p in (["fp32", "tf32", "bf16"] if cuda else ["fp32", "bf16"])}
+    if cuda and ctx.sizes.get("sdf_compile"):
+        out["neural_sdf_device_tf32_compiled"] = DeviceSphereTracer(nsdf.field, nsdf.domain, nsdf.trace_options,
+                                                                    precision="tf32", compiled=True)
+    out["grid_sdf_device_fp32"] = DeviceSphereTracer(gsdf.field, gsdf.domain, gsdf.trace_options)
+    return out
+
+
+def lod_casters(ctx: Context, mesh, caster: Callable, details: dict) -> dict[str, Callable]:
+    """{"mesh_lod_<faces>": Warp caster of the shape decimated to `lods` triangles}, the LODs from `prepared` when
+    there (a machine without pymeshlab cannot decimate: then {} and why in details["lods"])."""
+    out = {}
+    for faces in (int(f) for f in ctx.sizes.get("lods") or []):
+        try:
+            lod = prepared.mesh(ctx.sizes, f"{ctx.sizes['shape']}-lod", {"shape": ctx.sizes["shape"], "faces": faces},
+                                lambda: decimate(mesh, faces))
+        except InputError as err:
+            details["lods"] = f"not run: {err}"
+            return {}
+        out[f"mesh_lod_{len(lod.faces)}"] = caster(lod.vertices, lod.faces, ctx.device)
+    return out
+
+
+def mlp_flops(rep: DDF) -> int:
+    """Multiply-adds x 2 of one ray through the network's Linear layers (unpadded: what the network needs)."""
+    return 2 * sum(m.in_features * m.out_features for m in rep.net.modules() if isinstance(m, torch.nn.Linear))
 
 
 def entry_forward(rep: DDF, o: torch.Tensor, d: torch.Tensor, chunk: int, precision: str) -> Callable[[], None]:
@@ -151,38 +222,50 @@ def run(ctx: Context) -> SectionResult:
 
     s = ctx.sizes
     shape, oracle = ctx.shape(s["shape"]), ctx.oracle(s["shape"])
-    result = ctx.partial = SectionResult(details={"cpu_cores": os.cpu_count()})
-    samples = surface.sample(shape, oracle, preset("sampling", "surface"), "rays", np.random.default_rng(0))[0]
-    ddf, result.details["ddf"] = train_ddf(ctx, samples, dict(s.get("model") or {}))
-    nsdf, result.details["neural_sdf"] = neural_sdf(ctx, SDF_PRESET)
-    gsdf, result.details["grid_sdf"] = grid_sdf(ctx)
-    warp = WarpCaster(shape.mesh.vertices, shape.mesh.faces, ctx.device)
+    result = ctx.partial = SectionResult(details={"cpu_cores": os.cpu_count(), "ray_seed": int(s.get("ray_seed", 1))})
+    if ctx.device.startswith("cuda"):
+        from ddfbench.bench.fused_parts import dense_bf16_tflops
 
-    embree, pool = embree_all_cores(ctx, oracle, shape.mesh, result)
+        result.details["dense_bf16_tflops"] = dense_bf16_tflops(ctx.device)
+    samples = functools.cache(  # labels only for a network fit here (not one loaded from `prepared`)
+        lambda: surface.sample(shape, oracle, preset("sampling", "surface"), "rays", np.random.default_rng(0))[0])
+    cold = result.details["cold"] = {}
+    (ddf, result.details["ddf"]), cold["ddf_load_or_fit_s"] = timed(lambda: train_ddf(ctx, samples, dict(s.get("model") or {})))
+    nsdf, result.details["neural_sdf"], gsdf, result.details["grid_sdf"] = sdf_contestants(ctx)
+    warp, cold["warp_bvh_build_s"] = timed(lambda: WarpCaster(shape.mesh.vertices, shape.mesh.faces, ctx.device))
+    lods = lod_casters(ctx, shape.mesh, WarpCaster, result.details)
+
+    (embree, pool), cold["embree_pool_start_s"] = timed(lambda: embree_all_cores(ctx, oracle, shape.mesh, result))
+    if importlib.util.find_spec("embreex") is not None:
+        from ddfbench.truth.oracle import Oracle
+
+        cold["embree_build_s"] = timed(lambda: Oracle(shape.mesh, "embree"))[1]  # one process, the scene alone
     reference = pool.hit_distance if pool is not None else oracle.hit_distance
     result.details["reference"] = "embreex pool" if pool is not None else f"{ctx.oracle_backend} oracle"
     try:
-        _race_all(ctx, result, samples, ddf, nsdf, gsdf, warp, reference, embree)
+        _race_all(ctx, result, samples, ddf, nsdf, gsdf, warp, lods, reference, embree)
     finally:
         if pool is not None:
             pool.close()
     return result
 
 
-def _race_all(ctx: Context, result: SectionResult, samples, ddf, nsdf, gsdf, warp, reference: Callable,
+def _race_all(ctx: Context, result: SectionResult, samples, ddf, nsdf, gsdf, warp, lods: dict, reference: Callable,
               embree: dict) -> None:
     """The two ray sets, the sweep and the capacities (run's body, once every contestant is built);
     reference(o, d) -> t (N,): the depth every contestant is scored against."""
-    s, chunk = ctx.sizes, int(ctx.sizes["chunk"])
+    s, chunk, seed = ctx.sizes, int(ctx.sizes["chunk"]), int(ctx.sizes.get("ray_seed", 1))
     variants = ddf_variants(ctx, ddf, compile_too=True, details=result.details)
-    contestants: dict[str, Callable] = {name: (lambda o, d, on, dn, f=f: f(o, d)) for name, f in variants.items()}
+    tracers = device_tracers(ctx, nsdf, gsdf)
+    contestants: dict[str, Callable] = {name: (lambda o, d, on, dn, f=f: f(o, d)) for name, f in {**variants, **tracers}.items()}
     contestants.update({
         "warp_bvh": lambda o, d, on, dn: warp.cast_torch(o, d)[0],
         **embree,
         "neural_sdf_trace": lambda o, d, on, dn: _sdf_t(nsdf, on, dn),
         "grid_sdf_trace": lambda o, d, on, dn: _sdf_t(gsdf, on, dn),
     })
-    ray_sets = {"primary": view_rays(int(s["px"])), "incoherent": incoherent_rays(int(s["incoherent_rays"]), seed=1)}
+    ray_sets = {"primary": view_rays(int(s["px"]), eye=orbit_eye(seed)),
+                "incoherent": incoherent_rays(int(s["incoherent_rays"]), seed=seed)}
     for set_name, (o_np, d_np) in ray_sets.items():
         n = len(o_np)
         o_dev, d_dev = torch.as_tensor(o_np, device=ctx.device), torch.as_tensor(d_np, device=ctx.device)
@@ -196,12 +279,21 @@ def _race_all(ctx: Context, result: SectionResult, samples, ddf, nsdf, gsdf, war
             if not name.startswith("ddf_bare"):
                 details[name].update(accuracy(t, t_ref))
         best = fastest(timed, variants)
+        fastest_sdf = {kind: fastest(timed, [n for n in tracers if n.startswith(kind)]) for kind in ("neural_sdf", "grid_sdf")}
+        details["fastest"] = {"ddf": best, **fastest_sdf}
         acc = {k: details[k] for k in ("ddf_fp32", best, "warp_bvh")}
         note = (f"DDF depth MAE {acc[best]['depth_mae']:.2e} IoU {acc[best]['mask_iou']:.3f}; "
                 f"Warp MAE {acc['warp_bvh']['depth_mae']:.1e} IoU {acc['warp_bvh']['mask_iou']:.4f}")
-        for ref in (r for r in ("warp_bvh", "embree_all_cores", "neural_sdf_trace", "grid_sdf_trace") if r in timed):
+        refs = ("warp_bvh", "embree_all_cores", *fastest_sdf.values(), "neural_sdf_trace", "grid_sdf_trace")
+        for ref in (r for r in refs if r in timed):
             result.rows.append(_rate_row(f"{set_name}: DDF ({best}) rays/s", timed[best][1], f"{ref} rays/s, same rays",
                                          timed[ref][1], n, ctx, note=note if ref == "warp_bvh" else ""))
+        for kind, name in fastest_sdf.items():  # the device-resident tracer against the numpy-in-and-out loop
+            result.rows.append(_rate_row(
+                f"{set_name}: {kind} device tracer ({name}) rays/s", timed[name][1], f"{kind}_trace (intersect, "
+                "numpy in and out) rays/s, same rays", timed[f"{kind}_trace"][1], n, ctx,
+                note=f"depth MAE {details[name]['depth_mae']:.2e} IoU {details[name]['mask_iou']:.3f}; loop: "
+                     f"{details[f'{kind}_trace']['depth_mae']:.2e} / {details[f'{kind}_trace']['mask_iou']:.3f}"))
         bare = f"ddf_bare_{_precision(best)}"  # the forward in the fastest variant's own precision
         result.rows.append(_rate_row(f"{set_name}: DDF ({best}) rays/s", timed[best][1],
                                      f"bare {_precision(best)} network forward rays/s, same entry points", timed[bare][1],
@@ -219,7 +311,7 @@ def _race_all(ctx: Context, result: SectionResult, samples, ddf, nsdf, gsdf, war
         result.details["fused_kernel_config"] = {"mlp": config("mlp"), "depth": config("depth")}
     sweep(ctx, variants, best, warp, embree, result)
     if s.get("capacities", True):
-        capacities(ctx, samples, ray_sets["primary"], reference, result)
+        capacities(ctx, samples, ray_sets["primary"], reference, {"warp_bvh": warp, **lods}, result)
 
 
 def embree_all_cores(ctx: Context, oracle, mesh, result: SectionResult) -> tuple[dict[str, Callable], EmbreePool | None]:
@@ -273,21 +365,32 @@ def sweep(ctx: Context, variants: dict[str, DDFDepth], best_name: str, warp, emb
     return rows
 
 
-def capacities(ctx: Context, samples, primary, reference: Callable, result: SectionResult) -> dict[str, dict]:
-    """The Pareto sweep's four DDF capacities, each trained fit_seconds: rays/s (fp32, bf16 and on CUDA the
+def capacities(ctx: Context, samples, primary, reference: Callable, meshes: dict, result: SectionResult) -> dict[str, dict]:
+    """The Pareto sweep's four DDF capacities, each fit like the main DDF: rays/s (fp32, bf16 and on CUDA the
     one-kernel depth where the network fits it; not compiled: a compile per network costs more device time than
-    it tells) and accuracy; the rows name the fastest bf16 variant."""
+    it tells) and accuracy, raced beside `meshes` ({name: WarpCaster}: the shape's BVH and its LODs) on the same
+    rays, so every ratio to the BVH is measured side by side; the rows name the fastest bf16 variant. On CUDA
+    also the fastest variant's TFLOP/s (mlp_flops) and its share of the dense bf16 product's rate."""
     o_np, d_np = primary
+    n = len(o_np)
     t_ref, out = reference(o_np, d_np), result.details.setdefault("capacities", {})  # filled as it goes
+    casts = {name: (lambda o, d, on, dn, c=c: c.cast_torch(o, d)[0]) for name, c in meshes.items()}
     for level, overrides in pareto_ddf_capacities().items():
         rep, info = train_ddf(ctx, samples, overrides)
-        timed = race(ctx, o_np, d_np, {name: (lambda o, d, on, dn, f=f: f(o, d)) for name, f in ddf_variants(ctx, rep, False).items()})
-        out[level] = {**info, **{name: {"rays_per_s": timing.rate(len(o_np)), **accuracy(t, t_ref)}
-                                 for name, (t, timing) in timed.items()}}
-        best = fastest(timed, [name for name in timed if name != "ddf_fp32"])
-        result.rows.append(compare("race", f"capacity {level} ({info['width']}x{info['depth']}): DDF ({best}) rays/s",
-                                   timed[best][1].rate(len(o_np)), "rays/s", "same network fp32 rays/s",
-                                   timed["ddf_fp32"][1].rate(len(o_np)), device=ctx.device, threads=ctx.threads,
-                                   precision=_precision(best),
-                                   note=f"depth MAE {out[level][best]['depth_mae']:.2e}, IoU {out[level][best]['mask_iou']:.3f}"))
+        variants = {name: (lambda o, d, on, dn, f=f: f(o, d)) for name, f in ddf_variants(ctx, rep, False).items()}
+        timed = race(ctx, o_np, d_np, {**variants, **casts})
+        out[level] = {**info, "flops_per_ray": mlp_flops(rep),
+                      **{name: {"rays_per_s": timing.rate(n), "cold_s": timing.cold_s, **accuracy(t, t_ref)}
+                         for name, (t, timing) in timed.items()}}
+        best = fastest(timed, [name for name in variants if name != "ddf_fp32"])
+        out[level]["fastest"] = best
+        if "dense_bf16_tflops" in result.details:
+            tflops = timed[best][1].rate(n) * out[level]["flops_per_ray"] / 1e12
+            out[level]["tflops"], out[level]["share_of_dense_bf16"] = tflops, tflops / result.details["dense_bf16_tflops"]
+        note = f"depth MAE {out[level][best]['depth_mae']:.2e}, IoU {out[level][best]['mask_iou']:.3f}"
+        for ref, label in (("ddf_fp32", "same network fp32"), *((m, f"{m} (Warp) beside it") for m in casts)):
+            result.rows.append(compare("race", f"capacity {level} ({info['width']}x{info['depth']}): DDF ({best}) rays/s",
+                                       timed[best][1].rate(n), "rays/s", f"{label} rays/s", timed[ref][1].rate(n),
+                                       device=ctx.device, threads=ctx.threads, precision=_precision(best),
+                                       note=note if ref == "ddf_fp32" else f"{ref} depth MAE {out[level][ref]['depth_mae']:.2e}"))
     return out

@@ -20,14 +20,15 @@ SIZES: dict[str, dict[str, dict]] = {
         # GPU scale (run by default on CUDA only): 1M primary and 1M incoherent rays, 1k..16M sweep
         "race": {"shape": "bunny", "px": 1024, "incoherent_rays": 1 << 20,
                  "sweep": [1000, 4000, 16_000, 64_000, 256_000, 1 << 20, 1 << 22, 1 << 24], "embree_max": 1 << 24,
-                 "fit_seconds": 25.0, "n_samples": 200_000, "grid_resolution": 128, "chunk": 1 << 21,
-                 "compile": True, "capacities": True, "model": {}, "neural": {}},
+                 "fit_seconds": 25.0, "fit_steps": 0, "prepared": None, "ray_seed": 1, "n_samples": 200_000,
+                 "grid_resolution": 128, "chunk": 1 << 21, "compile": True, "sdf_compile": True, "capacities": True,
+                 "lods": [1000, 4000, 16000], "model": {}, "neural": {}},
         "field_cost": {"points": 8192, "chunks": [8, 16, 32, 64, 128, 256, 1024, 4096], "gemm": 2048,
                        "sdf_preset": "neural_sdf_tuned", "gan_preset": "gan_sdf_tuned"},
         "gan_train": {"batch": 1024},  # the thesis preset's batch
         # the bunny's 56,172 triangles decimated to 1k-16k and subdivided x4, x16, x64 (to 3.6M)
         "crossover": {"shape": "bunny", "counts": [1000, 4000, 16000, 56172, 224688, 898752, 3595008], "px": 256,
-                      "incoherent_rays": 1 << 18, "models": ["ddf_tuned", "ddf_line_grid_tuned"]},
+                      "incoherent_rays": 1 << 18, "models": ["ddf_tuned", "ddf_line_grid_tuned"], "prepared": None},
     },
     "small": {
         "sampling": {"shape": "sphere", "face_mode": "total", "s_fc": 1, "s_dr": 2, "s_p": 2, "bare_rays": 20_000},
@@ -45,12 +46,13 @@ SIZES: dict[str, dict[str, dict]] = {
                                  "args": ["shape=cube", "model=mesh", "eval=smoke", "scene=none", "sampling=random",
                                           "sampling.n_samples=2000"]}]},
         "race": {"shape": "sphere", "px": 12, "incoherent_rays": 300, "sweep": [100, 400], "embree_max": 100,
-                 "fit_seconds": 0.3, "n_samples": 3000, "grid_resolution": 16, "chunk": 128, "compile": False,
-                 "capacities": True, "model": {"batch": 256}, "neural": {"width": 16, "depth": 2, "batch": 256}},
+                 "fit_seconds": 0.3, "fit_steps": 0, "prepared": None, "ray_seed": 1, "n_samples": 3000,
+                 "grid_resolution": 16, "chunk": 128, "compile": False, "sdf_compile": False, "capacities": True, "lods": [300],
+                 "model": {"batch": 256}, "neural": {"width": 16, "depth": 2, "batch": 256}},
         "field_cost": {"points": 256, "chunks": [64, 256], "gemm": 128,
                        "sdf_preset": "neural_sdf_tuned", "gan_preset": "gan_sdf_tuned"},
         "gan_train": {"batch": 16},
         "crossover": {"shape": "sphere", "counts": [500, 2000, 20480], "px": 16, "incoherent_rays": 512,
-                      "models": ["ddf_tuned"]},
+                      "models": ["ddf_tuned"], "prepared": None},
     },
 }

@@ -1,9 +1,11 @@
 #!/bin/bash
-# Issue 17: make the two ignored staging folders that the device calls carry (the device machine has no
-# network and one call carries 64 MiB): .devA for the first call (stage_and_parts.sh as pre.sh, Warp's
-# first part, the wheels the bench needs), .devB for the second (Warp's second part and the rest of its
-# wheel, the embreex wheel, the bunny, setup_b.sh, run_race.sh as go.sh, run_train_curves.sh).
-# usage: bash tools/device/make_dev_folders.sh   (in the repo root, with the project's venv active)
+# Issues 17 and 51: make the two ignored staging folders that the device calls carry (the device machine has no
+# network and one call carries 64 MiB, the working tree included: move reports/ aside during the calls). .devA for
+# the first call (stage_and_parts.sh as pre.sh and Warp's first part, as much as fits), .devB for the second
+# (Warp's second part and the rest of its wheel, the wheels the bench needs, the bunny, setup_b.sh, run_race.sh
+# as go.sh, run_train_curves.sh, run_repeats.sh, and with PREPARED=DIR that folder of trained networks and LODs
+# (ddfbench.bench.prepared) as .devB/prepared).
+# usage: [PREPARED=DIR] bash tools/device/make_dev_folders.sh   (in the repo root, with the project's venv active)
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 here=tools/device
@@ -20,9 +22,10 @@ tar -C /tmp/wx -cf - --exclude='warp/bin/*.so' --exclude='warp/bin/*.xz' warp wa
 head -c 63000000 /tmp/wx/warp/bin/warp.so.xz > .devA/wA
 tail -c +63000001 /tmp/wx/warp/bin/warp.so.xz > .devB/wB
 cp .whl/*.whl .devB/ && cp .devB/*.whl .devA/ && rm .devA/embreex-*.whl
+if [ -n "${PREPARED:-}" ]; then cp -r "$PREPARED" .devB/prepared; fi
 meshes="$(python -c 'import os, pymeshlab; print(os.path.dirname(pymeshlab.__file__))')/tests/sample_meshes"
 xz -9 -c "$meshes/bunny.obj" > .devB/bunny.obj.xz
 cp $here/stage_and_parts.sh .devA/pre.sh && cp $here/run_race.sh .devB/go.sh
-cp $here/setup_b.sh $here/run_train_curves.sh .devB/
+cp $here/setup_b.sh $here/run_train_curves.sh $here/run_repeats.sh .devB/
 rm -rf .whl /tmp/wx
 du -sh .devA .devB

@@ -1,11 +1,12 @@
 #!/bin/bash
-# Issue 17, first call: stage Warp's first part, then where the fused DDF's time goes (no Warp needed;
-# it also fills Triton's cache with the autotuned kernels of ddf_tuned for the race).
+# Issues 17 and 51, first call: stage Warp's first part, then (PARTS_RAYS, default "2097152 16777216"; empty: none)
+# where the fused DDF's time goes (no Warp needed; it also fills Triton's cache with the autotuned kernels of
+# ddf_tuned, so leave it out when the second call measures cold costs).
 cd "$(dirname "$0")/.."
 mkdir -p /root/stage /tmp/site && cp .devA/wA /root/stage/wA
 python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade --target /tmp/site .devA/*.whl || exit 3
 export PYTHONPATH=/tmp/site:$PWD PYTHONUNBUFFERED=1
 nvidia-smi --query-gpu=name,driver_version,clocks.max.sm,power.limit,memory.total --format=csv | tee $OUT/gpu.csv
-for n in 2097152 16777216; do
+for n in ${PARTS_RAYS-2097152 16777216}; do
   timeout ${PARTS_S:-150} python3 -m ddfbench.bench.fused_parts --device cuda --rays $n --out $OUT/fused_parts_$n.json 2>&1 | tail -10
 done

@@ -1,0 +1,190 @@
+"""python -m ddfbench.bench.repeats RUN.json [RUN.json ...] [--out FOLDER]
+
+The race (ddfbench.bench.race) repeated in fresh processes with distinct ray seeds, pooled (issue 51). Every
+ratio is formed inside one run, from two rates measured side by side on the same rays; across runs each
+ratio gets its median, mean ± std and the 95 % t-interval of the mean (ddfbench.report.stats), with the
+per-run values by ray seed. Pooled: the fastest DDF against each other contestant on both ray sets, the
+device-resident SDF tracers against the numpy loop, every capacity against the BVH and the LODs raced beside
+it (with depth error and the share of the dense bf16 product's rate), and the cold costs. Writes
+repeats.md and repeats.json into --out (default: the first run's folder).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import statistics
+import sys
+
+from ddfbench.core.errors import InputError
+from ddfbench.report.stats import sig3, summarize_values
+
+SETS = ("primary", "incoherent")
+REFERENCES = ("warp_bvh", "embree_all_cores", "neural_sdf_trace", "grid_sdf_trace")
+
+
+def load_race(path: str) -> dict:
+    """The race section's details of one bench JSON; a one-line InputError naming the file when it has none."""
+    try:
+        with open(path) as fh:
+            doc = json.load(fh)
+        race = doc["sections"]["race"]
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        raise InputError(f"{path}: not a bench JSON with a race section ({type(exc).__name__}: {exc})") from None
+    if race.get("error"):
+        raise InputError(f"{path}: its race failed ({race['error']})")
+    return {**race["details"], "_gpu": doc.get("env", {}).get("gpu"), "_commit": doc.get("env", {}).get("git_sha")}
+
+
+def ratios(run: dict) -> dict[str, float]:
+    """{quantity: value} of one run: rates and ratios of rates measured side by side in that run."""
+    out: dict[str, float] = {}
+    for set_name in SETS:
+        d = run.get(set_name)
+        if not d:
+            continue
+        # by role, so that a run whose fastest variant differs still pools (fastest_names says which it was)
+        roles = {"DDF": d["fastest"]["ddf"], "neural SDF device tracer": d["fastest"]["neural_sdf"],
+                 "grid SDF device tracer": d["fastest"]["grid_sdf"], **{r: r for r in REFERENCES if r in d}}
+        rate = d[roles["DDF"]]["rays_per_s"]
+        out[f"{set_name}: DDF rays/s"] = rate
+        for role, name in roles.items():
+            if role != "DDF":
+                out[f"{set_name}: DDF / {role}"] = rate / d[name]["rays_per_s"]
+        bare = f"ddf_bare_{'bf16' if 'bf16' in roles['DDF'] else 'fp32'}"
+        out[f"{set_name}: DDF / its bare forward"] = rate / d[bare]["rays_per_s"]
+        for kind, loop in (("neural", "neural_sdf_trace"), ("grid", "grid_sdf_trace")):
+            out[f"{set_name}: {kind} SDF device tracer / {loop}"] = (
+                d[roles[f"{kind} SDF device tracer"]]["rays_per_s"] / d[loop]["rays_per_s"])
+        for role in ("DDF", "warp_bvh", "neural SDF device tracer", "grid SDF device tracer", "neural_sdf_trace"):
+            out[f"{set_name}: depth MAE {role}"] = d[roles[role]]["depth_mae"]
+            out[f"{set_name}: mask IoU {role}"] = d[roles[role]]["mask_iou"]
+    for level, c in (run.get("capacities") or {}).items():
+        tag = f"capacity {level} ({c['width']}x{c['depth']})"
+        best = c["fastest"]
+        out[f"{tag}: DDF rays/s"] = c[best]["rays_per_s"]
+        meshes = [k for k in c if k == "warp_bvh" or k.startswith("mesh_lod_")]
+        for m in meshes:
+            out[f"{tag}: DDF / {m}"] = c[best]["rays_per_s"] / c[m]["rays_per_s"]
+        out[f"{tag}: depth MAE"] = c[best]["depth_mae"]
+        out[f"{tag}: mask IoU"] = c[best]["mask_iou"]
+        if "share_of_dense_bf16" in c:
+            out[f"{tag}: TFLOP/s"] = c["tflops"]
+            out[f"{tag}: share of the dense bf16 product"] = c["share_of_dense_bf16"]
+    first = next(iter((run.get("capacities") or {}).values()), {})
+    for m in (k for k in first if k.startswith("mesh_lod_")):
+        out[f"{m}: depth MAE (primary)"] = first[m]["depth_mae"]
+        out[f"{m}: mask IoU (primary)"] = first[m]["mask_iou"]
+    for key, seconds in (run.get("cold") or {}).items():
+        out[f"cold: {key}"] = seconds
+    primary = run.get("primary") or {}
+    for name, v in primary.items():
+        if isinstance(v, dict) and "cold_s" in v:
+            out[f"cold: first call {name} (primary)"] = v["cold_s"]
+    if "dense_bf16_tflops" in run:
+        out["dense bf16 8192^3 product TFLOP/s"] = run["dense_bf16_tflops"]
+    return out
+
+
+def fastest_names(runs: list[dict]) -> dict[str, list[str]]:
+    """{"primary: DDF": [the fastest variant's name in each run], ...}: which variant a role's figures are of."""
+    out: dict[str, list[str]] = {}
+    for set_name in SETS:
+        for role in ("ddf", "neural_sdf", "grid_sdf"):
+            names = [r[set_name]["fastest"][role] for r in runs if set_name in r]
+            if names:
+                out[f"{set_name}: {role}"] = names
+    for level in (runs[0].get("capacities") or {}):
+        out[f"capacity {level}"] = [r["capacities"][level]["fastest"] for r in runs if level in (r.get("capacities") or {})]
+    return out
+
+
+def pool(runs: list[dict]) -> list[dict]:
+    """One row per quantity found in every run: n, median, mean, std, 95 % interval, values by ray seed."""
+    per_run = [ratios(r) for r in runs]
+    seeds = [r.get("ray_seed") for r in runs]
+    rows = []
+    for key in per_run[0]:
+        values = [p.get(key) for p in per_run]
+        if any(v is None for v in values):
+            continue
+        s = summarize_values(values)
+        rows.append({"quantity": key, "n": s.n, "median": statistics.median(values), "mean": s.mean, "std": s.std,
+                     "lo": s.lo, "hi": s.hi, "values": dict(zip(map(str, seeds), values))})
+    return rows
+
+
+def verdicts(rows: list[dict]) -> list[str]:
+    """The capacity claim: the most accurate capacity whose interval of DDF / warp_bvh lies above 1 (or that
+    none does), and the LODs' depth error and speed against it."""
+    by = {r["quantity"]: r for r in rows}
+    caps = sorted({q.split(":")[0] for q in by if q.startswith("capacity ")})
+    faster = [c for c in caps if f"{c}: DDF / warp_bvh" in by and by[f"{c}: DDF / warp_bvh"]["lo"] > 1.0]
+    lines = []
+    if not faster:
+        lines.append("No DDF capacity is faster than the BVH with its whole 95 % interval above 1.")
+    else:
+        best = min(faster, key=lambda c: by[f"{c}: depth MAE"]["median"])
+        r, mae = by[f"{best}: DDF / warp_bvh"], by[f"{best}: depth MAE"]
+        lines.append(f"The most accurate DDF faster than the BVH: {best}, {sig3(r['median'])}x the BVH's rays/s "
+                     f"[{sig3(r['lo'])}, {sig3(r['hi'])}], depth MAE {mae['median']:.2e} (median of {r['n']} runs).")
+        for q in (q for q in by if q.startswith(f"{best}: DDF / mesh_lod_")):
+            lod = q.split("/ ")[1]
+            lod_mae = by.get(f"{lod}: depth MAE (primary)")
+            if lod_mae:
+                lines.append(f"- {lod}: depth MAE {lod_mae['median']:.2e} ({lod_mae['median'] / mae['median']:.3g}x the "
+                             f"DDF's); the DDF answers {sig3(by[q]['median'])}x its rays/s [{sig3(by[q]['lo'])}, "
+                             f"{sig3(by[q]['hi'])}].")
+    return lines
+
+
+def _fmt(x: float) -> str:
+    if x is None or not math.isfinite(x):
+        return "–"
+    return f"{x:.3g}" if 1e-2 <= abs(x) < 1e5 else f"{x:.2e}"
+
+
+def to_markdown(runs: list[dict], rows: list[dict], paths: list[str]) -> str:
+    head = [f"# The race repeated: {len(runs)} fresh processes, ray seeds {', '.join(str(r.get('ray_seed')) for r in runs)}",
+            "", f"GPU: {runs[0].get('_gpu') or 'none (CPU)'}; commit {runs[0].get('_commit')}; runs: "
+            + ", ".join(f"`{os.path.basename(p)}`" for p in paths), "",
+            "Each value is formed inside one run from rates measured side by side on the same rays; across runs: "
+            "median, mean ± std, and the 95 % t-interval of the mean in brackets (`python -m ddfbench.bench.repeats`).",
+            "", *verdicts(rows), "", "The fastest variant in each run (the role's figures are its): "
+            + "; ".join(f"{k} {', '.join(sorted(set(v)))}" for k, v in fastest_names(runs).items()) + ".", "",
+            "| quantity | n | median | mean ± std | 95 % interval | by ray seed |", "|---|---|---|---|---|---|"]
+    body = [f"| {r['quantity']} | {r['n']} | {_fmt(r['median'])} | {_fmt(r['mean'])} ± {_fmt(r['std'])} | "
+            f"[{_fmt(r['lo'])}, {_fmt(r['hi'])}] | {', '.join(f'{k}: {_fmt(v)}' for k, v in r['values'].items())} |"
+            for r in rows]
+    return "\n".join(head + body) + "\n"
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m ddfbench.bench.repeats", description=__doc__.splitlines()[0])
+    ap.add_argument("runs", nargs="+", help="bench JSON files, one per process")
+    ap.add_argument("--out", default=None, help="folder for repeats.md and repeats.json (default: the first run's)")
+    args = ap.parse_args(argv)
+    try:
+        runs = [load_race(p) for p in args.runs]
+        seeds = [r.get("ray_seed") for r in runs]
+        if len(set(seeds)) != len(seeds):
+            raise InputError(f"ray seeds {seeds}: each run needs its own (--set race.ray_seed=K)")
+    except InputError as err:
+        print(f"ddfbench.bench.repeats: {err}", file=sys.stderr)
+        return 2
+    rows = pool(runs)
+    out = args.out or os.path.dirname(os.path.abspath(args.runs[0]))
+    os.makedirs(out, exist_ok=True)
+    md = to_markdown(runs, rows, args.runs)
+    with open(os.path.join(out, "repeats.md"), "w") as fh:
+        fh.write(md)
+    with open(os.path.join(out, "repeats.json"), "w") as fh:
+        json.dump({"runs": [os.path.basename(p) for p in args.runs], "seeds": seeds, "rows": rows}, fh, indent=1)
+    print(md)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

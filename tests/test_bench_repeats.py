@@ -1,0 +1,99 @@
+"""ddfbench.bench.repeats: ratios are formed inside each run, pooled across runs with the t interval, the
+capacity verdict picks the most accurate capacity whose interval lies above 1, and bad input is one line."""
+
+import json
+import math
+
+import pytest
+
+from ddfbench.bench import repeats
+from ddfbench.bench.views import EYE, orbit_eye
+
+
+def _set(ddf_rate: float, warp_rate: float) -> dict:
+    def c(rate, mae=1e-2, iou=0.9):
+        return {"rays_per_s": rate, "depth_mae": mae, "mask_iou": iou, "cold_s": 0.5}
+    return {"fastest": {"ddf": "ddf_bf16_fused_depth", "neural_sdf": "neural_sdf_device_tf32",
+                        "grid_sdf": "grid_sdf_device_fp32"},
+            "ddf_bf16_fused_depth": c(ddf_rate), "warp_bvh": c(warp_rate, 1e-7, 1.0),
+            "neural_sdf_device_tf32": c(ddf_rate / 50), "grid_sdf_device_fp32": c(ddf_rate / 20),
+            "neural_sdf_trace": c(ddf_rate / 500), "grid_sdf_trace": c(ddf_rate / 100),
+            "ddf_bare_bf16": c(ddf_rate / 4)}
+
+
+def _cap(ddf_rate, warp_rate, mae, lod_rate=None):
+    out = {"width": 64, "depth": 3, "fastest": "ddf_bf16", "ddf_bf16": {"rays_per_s": ddf_rate, "depth_mae": mae,
+                                                                         "mask_iou": 0.8},
+           "warp_bvh": {"rays_per_s": warp_rate, "depth_mae": 0.0, "mask_iou": 1.0}}
+    if lod_rate:
+        out["mesh_lod_1000"] = {"rays_per_s": lod_rate, "depth_mae": 3e-3, "mask_iou": 0.99}
+    return out
+
+
+def _run(seed: int, ratio: float) -> dict:
+    return {"ray_seed": seed, "primary": _set(2e9 * ratio, 2e9), "incoherent": _set(1e9, 1e9 / ratio),
+            "capacities": {"c1": _cap(3e9, 1e9 * (1 + 0.01 * seed), 2e-2, 6e9),
+                           "c2": _cap(2e9, 1e9 * (1 + 0.01 * seed), 1e-2, 6e9),
+                           "c3": _cap(0.5e9, 1e9, 5e-3, 6e9)},
+            "cold": {"warp_bvh_build_s": 0.01 * seed}}
+
+
+def test_ratios_are_formed_inside_a_run():
+    r = repeats.ratios(_run(1, 2.0))
+    assert r["primary: DDF / warp_bvh"] == pytest.approx(2.0)
+    assert r["incoherent: DDF / warp_bvh"] == pytest.approx(2.0)
+    assert r["primary: DDF / neural SDF device tracer"] == pytest.approx(50.0)
+    assert r["primary: neural SDF device tracer / neural_sdf_trace"] == pytest.approx(10.0)
+    assert r["primary: DDF / its bare forward"] == pytest.approx(4.0)
+    assert r["capacity c1 (64x3): DDF / mesh_lod_1000"] == pytest.approx(0.5)
+    assert r["cold: warp_bvh_build_s"] == pytest.approx(0.01)
+
+
+def test_pooling_gives_median_and_the_t_interval_by_hand():
+    rows = {r["quantity"]: r for r in repeats.pool([_run(1, 1.0), _run(2, 2.0), _run(3, 3.0)])}
+    row = rows["primary: DDF / warp_bvh"]
+    half = 4.302652729911275 * 1.0 / math.sqrt(3)  # t(0.975, 2) * std / sqrt(n), std of 1, 2, 3 = 1
+    assert row["n"] == 3 and row["median"] == pytest.approx(2.0) and row["std"] == pytest.approx(1.0)
+    assert (row["lo"], row["hi"]) == (pytest.approx(2.0 - half), pytest.approx(2.0 + half))
+    assert row["values"] == {"1": pytest.approx(1.0), "2": pytest.approx(2.0), "3": pytest.approx(3.0)}
+
+
+def test_the_verdict_names_the_most_accurate_capacity_faster_than_the_bvh():
+    rows = repeats.pool([_run(k, 2.0) for k in (1, 2, 3)])
+    lines = repeats.verdicts(rows)
+    assert "c2" in lines[0] and "c3" not in lines[0]  # c3 is more accurate but slower than the BVH
+    assert any("mesh_lod_1000" in line and "0.3x the DDF's" in line for line in lines)
+
+
+def test_no_capacity_faster_is_said(tmp_path):
+    run = _run(1, 1.0)
+    for cap in run["capacities"].values():
+        cap["ddf_bf16"]["rays_per_s"] = 1e8
+    assert repeats.verdicts(repeats.pool([run, {**run, "ray_seed": 2}]))[0].startswith("No DDF capacity")
+
+
+def _write(path, details, error=None):
+    path.write_text(json.dumps({"env": {"gpu": "X", "git_sha": "abc"},
+                                "sections": {"race": {"error": error, "details": details}}}))
+    return str(path)
+
+
+def test_main_writes_the_pooled_table_and_refuses_bad_input(tmp_path, capsys):
+    paths = [_write(tmp_path / f"r{k}.json", _run(k, 1.5 + 0.1 * k)) for k in (1, 2, 3)]
+    assert repeats.main([*paths, "--out", str(tmp_path / "out")]) == 0
+    md = (tmp_path / "out" / "repeats.md").read_text()
+    assert "ray seeds 1, 2, 3" in md and "| primary: DDF / warp_bvh | 3 |" in md
+    assert repeats.main([paths[0], paths[0]]) == 2
+    assert "each run needs its own" in capsys.readouterr().err
+    bad = _write(tmp_path / "bad.json", {}, error="Stopped: SIGTERM")
+    assert repeats.main([bad]) == 2 and "bad.json: its race failed" in capsys.readouterr().err
+    (tmp_path / "cut.json").write_text("{")
+    assert repeats.main([str(tmp_path / "cut.json")]) == 2 and "cut.json: not a bench JSON" in capsys.readouterr().err
+
+
+def test_ray_seeds_turn_the_camera_about_the_vertical_axis():
+    assert orbit_eye(1) == pytest.approx(EYE) and orbit_eye(6) == pytest.approx(EYE)
+    for k in (2, 3, 4, 5):
+        e = orbit_eye(k)
+        assert e[1] == pytest.approx(EYE[1]) and math.hypot(e[0], e[2]) == pytest.approx(math.hypot(EYE[0], EYE[2]))
+        assert not e == pytest.approx(EYE)
