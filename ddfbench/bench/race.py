@@ -55,7 +55,7 @@ from ddfbench.bench.timing import Timing, measure_side_by_side
 from ddfbench.bench.tracing import grid_sdf, neural_sdf
 from ddfbench.bench.views import incoherent_rays, orbit_eye, view_rays
 from ddfbench.core import plugins
-from ddfbench.core.clock import timed
+from ddfbench.core.clock import clock, timed
 from ddfbench.core.errors import InputError, one_line
 from ddfbench.core.geometry import box_entry
 from ddfbench.evaluate.trace_device import DeviceSphereTracer
@@ -114,16 +114,26 @@ def sdf_contestants(ctx: Context) -> tuple[NeuralSDF, dict, GridSDF, dict]:
     return nsdf.to(ctx.device), n_info, gsdf.to(ctx.device), g_info
 
 
-def device_tracers(ctx: Context, nsdf: NeuralSDF, gsdf: GridSDF) -> dict[str, DeviceSphereTracer]:
+def device_tracers(ctx: Context, nsdf: NeuralSDF, gsdf: GridSDF, details: dict) -> dict[str, DeviceSphereTracer]:
     """Both SDFs through the device-resident tracer with their presets' trace options: the neural SDF in fp32 and
-    bf16 (on CUDA also tf32, and with `sdf_compile` its step compiled in tf32), the grid in fp32 (trilinear reads)."""
+    bf16 (on CUDA also tf32, and with `sdf_compile` its step compiled in tf32), the grid in fp32 (trilinear reads).
+    Each traces 4096 incoherent rays first: one that fails is left out with why in details[name], and the seconds
+    of that first call (a compile) go to details["cold"][f"{name}_first_4096_rays_s"]."""
     cuda = ctx.device.startswith("cuda")
-    out = {f"neural_sdf_device_{p}": DeviceSphereTracer(nsdf.field, nsdf.domain, nsdf.trace_options, precision=p)
-           for p in (["fp32", "tf32", "bf16"] if cuda else ["fp32", "bf16"])}
+    made = {f"neural_sdf_device_{p}": DeviceSphereTracer(nsdf.field, nsdf.domain, nsdf.trace_options, precision=p)
+            for p in (["fp32", "tf32", "bf16"] if cuda else ["fp32", "bf16"])}
     if cuda and ctx.sizes.get("sdf_compile"):
-        out["neural_sdf_device_tf32_compiled"] = DeviceSphereTracer(nsdf.field, nsdf.domain, nsdf.trace_options,
-                                                                    precision="tf32", compiled=True)
-    out["grid_sdf_device_fp32"] = DeviceSphereTracer(gsdf.field, gsdf.domain, gsdf.trace_options)
+        made["neural_sdf_device_tf32_compiled"] = DeviceSphereTracer(nsdf.field, nsdf.domain, nsdf.trace_options,
+                                                                     precision="tf32", compiled=True)
+    made["grid_sdf_device_fp32"] = DeviceSphereTracer(gsdf.field, gsdf.domain, gsdf.trace_options)
+    o, d = (torch.as_tensor(a, device=ctx.device) for a in incoherent_rays(4096, seed=5))
+    out = {}
+    for name, tracer in made.items():
+        try:
+            details.setdefault("cold", {})[f"{name}_first_4096_rays_s"] = timed(lambda: tracer(o, d))[1]
+            out[name] = tracer
+        except Exception as err:  # the race goes on without it; the JSON says why
+            details[name] = f"not run: {one_line(err)}"
     return out
 
 
@@ -159,7 +169,8 @@ def ddf_variants(ctx: Context, rep: DDF, compile_too: bool, details: dict | None
     """fp32, bf16, with compile_too and sizes `compile` bf16 compiled and, on CUDA with Triton, the fused kernels
     of ddfbench.models.ddf.fused: with compile_too the MLP kernel between compiled passes (ddf_bf16_fused) and always
     the one-kernel depth (ddf_bf16_fused_depth). A variant that cannot be built or answers 4096 rays unlike bf16
-    is left out, with why in details[name]."""
+    is left out, with why in details[name]; the seconds of a fused variant's build and check (its kernels'
+    compile and a first autotune) go to details["cold"][f"{name}_build_and_check_s"]."""
     chunk = int(ctx.sizes["chunk"])
     out = {"ddf_fp32": DDFDepth(rep, "fp32", chunk=chunk), "ddf_bf16": DDFDepth(rep, "bf16", chunk=chunk)}
     compiling = compile_too and ctx.sizes.get("compile")
@@ -168,9 +179,12 @@ def ddf_variants(ctx: Context, rep: DDF, compile_too: bool, details: dict | None
     if ctx.device.startswith("cuda") and importlib.util.find_spec("triton") is not None:
         for name, fused in [("ddf_bf16_fused", "mlp")] * bool(compiling) + [("ddf_bf16_fused_depth", "depth")]:
             try:
+                start = clock()
                 variant = DDFDepth(rep, "bf16", compiled=fused == "mlp", chunk=chunk, fused=fused)
                 _check_against(variant, out["ddf_bf16"], ctx.device)
                 out[name] = variant
+                if details is not None:
+                    details.setdefault("cold", {})[f"{name}_build_and_check_s"] = clock() - start
             except Exception as err:  # the race goes on without it; the JSON says why
                 if details is not None:
                     details[name] = f"not run: {one_line(err)}"
@@ -256,7 +270,7 @@ def _race_all(ctx: Context, result: SectionResult, samples, ddf, nsdf, gsdf, war
     reference(o, d) -> t (N,): the depth every contestant is scored against."""
     s, chunk, seed = ctx.sizes, int(ctx.sizes["chunk"]), int(ctx.sizes.get("ray_seed", 1))
     variants = ddf_variants(ctx, ddf, compile_too=True, details=result.details)
-    tracers = device_tracers(ctx, nsdf, gsdf)
+    tracers = device_tracers(ctx, nsdf, gsdf, result.details)
     contestants: dict[str, Callable] = {name: (lambda o, d, on, dn, f=f: f(o, d)) for name, f in {**variants, **tracers}.items()}
     contestants.update({
         "warp_bvh": lambda o, d, on, dn: warp.cast_torch(o, d)[0],
@@ -279,7 +293,8 @@ def _race_all(ctx: Context, result: SectionResult, samples, ddf, nsdf, gsdf, war
             if not name.startswith("ddf_bare"):
                 details[name].update(accuracy(t, t_ref))
         best = fastest(timed, variants)
-        fastest_sdf = {kind: fastest(timed, [n for n in tracers if n.startswith(kind)]) for kind in ("neural_sdf", "grid_sdf")}
+        fastest_sdf = {kind: fastest(timed, [n for n in tracers if n.startswith(kind)])
+                       for kind in ("neural_sdf", "grid_sdf") if any(n.startswith(kind) for n in tracers)}
         details["fastest"] = {"ddf": best, **fastest_sdf}
         acc = {k: details[k] for k in ("ddf_fp32", best, "warp_bvh")}
         note = (f"DDF depth MAE {acc[best]['depth_mae']:.2e} IoU {acc[best]['mask_iou']:.3f}; "

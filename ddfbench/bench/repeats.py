@@ -46,8 +46,9 @@ def ratios(run: dict) -> dict[str, float]:
         if not d:
             continue
         # by role, so that a run whose fastest variant differs still pools (fastest_names says which it was)
-        roles = {"DDF": d["fastest"]["ddf"], "neural SDF device tracer": d["fastest"]["neural_sdf"],
-                 "grid SDF device tracer": d["fastest"]["grid_sdf"], **{r: r for r in REFERENCES if r in d}}
+        roles = {"DDF": d["fastest"]["ddf"], **{f"{kind} SDF device tracer": d["fastest"][f"{kind}_sdf"]
+                                                 for kind in ("neural", "grid") if f"{kind}_sdf" in d["fastest"]},
+                 **{r: r for r in REFERENCES if r in d}}
         rate = d[roles["DDF"]]["rays_per_s"]
         out[f"{set_name}: DDF rays/s"] = rate
         for role, name in roles.items():
@@ -56,9 +57,11 @@ def ratios(run: dict) -> dict[str, float]:
         bare = f"ddf_bare_{'bf16' if 'bf16' in roles['DDF'] else 'fp32'}"
         out[f"{set_name}: DDF / its bare forward"] = rate / d[bare]["rays_per_s"]
         for kind, loop in (("neural", "neural_sdf_trace"), ("grid", "grid_sdf_trace")):
-            out[f"{set_name}: {kind} SDF device tracer / {loop}"] = (
-                d[roles[f"{kind} SDF device tracer"]]["rays_per_s"] / d[loop]["rays_per_s"])
-        for role in ("DDF", "warp_bvh", "neural SDF device tracer", "grid SDF device tracer", "neural_sdf_trace"):
+            if f"{kind} SDF device tracer" in roles and loop in roles:
+                out[f"{set_name}: {kind} SDF device tracer / {loop}"] = (
+                    d[roles[f"{kind} SDF device tracer"]]["rays_per_s"] / d[loop]["rays_per_s"])
+        for role in (r for r in ("DDF", "warp_bvh", "neural SDF device tracer", "grid SDF device tracer",
+                                 "neural_sdf_trace") if r in roles):
             out[f"{set_name}: depth MAE {role}"] = d[roles[role]]["depth_mae"]
             out[f"{set_name}: mask IoU {role}"] = d[roles[role]]["mask_iou"]
     for level, c in (run.get("capacities") or {}).items():
@@ -93,7 +96,7 @@ def fastest_names(runs: list[dict]) -> dict[str, list[str]]:
     out: dict[str, list[str]] = {}
     for set_name in SETS:
         for role in ("ddf", "neural_sdf", "grid_sdf"):
-            names = [r[set_name]["fastest"][role] for r in runs if set_name in r]
+            names = [r[set_name]["fastest"][role] for r in runs if role in r.get(set_name, {}).get("fastest", {})]
             if names:
                 out[f"{set_name}: {role}"] = names
     for level in (runs[0].get("capacities") or {}):
