@@ -85,7 +85,7 @@ def test_main_writes_the_pooled_table_and_refuses_bad_input(tmp_path, capsys):
     assert "ray seeds 1, 2, 3" in md and "| primary: DDF / warp_bvh | 3 |" in md
     assert repeats.main([paths[0], paths[0]]) == 2
     assert "each run needs its own" in capsys.readouterr().err
-    bad = _write(tmp_path / "bad.json", {}, error="Stopped: SIGTERM")
+    bad = _write(tmp_path / "bad.json", {}, error="RuntimeError: CUDA error")
     assert repeats.main([bad]) == 2 and "bad.json: its race failed" in capsys.readouterr().err
     (tmp_path / "cut.json").write_text("{")
     assert repeats.main([str(tmp_path / "cut.json")]) == 2 and "cut.json: not a bench JSON" in capsys.readouterr().err
@@ -97,3 +97,18 @@ def test_ray_seeds_turn_the_camera_about_the_vertical_axis():
         e = orbit_eye(k)
         assert e[1] == pytest.approx(EYE[1]) and math.hypot(e[0], e[2]) == pytest.approx(math.hypot(EYE[0], EYE[2]))
         assert not e == pytest.approx(EYE)
+
+
+def test_a_stopped_run_pools_what_it_measured(tmp_path):
+    """A race stopped by its time limit before the capacities still adds its ray-set ratios; a quantity only one
+    run has is not pooled."""
+    cut = {k: v for k, v in _run(3, 3.0).items() if k != "capacities"}
+    paths = [_write(tmp_path / "r1.json", _run(1, 1.0)), _write(tmp_path / "r2.json", _run(2, 2.0)),
+             _write(tmp_path / "r3.json", cut, error="Stopped: SIGTERM: the bench was stopped midway")]
+    runs = [repeats.load_race(p) for p in paths]
+    rows = {r["quantity"]: r for r in repeats.pool(runs)}
+    assert rows["primary: DDF / warp_bvh"]["n"] == 3 and rows["primary: DDF / warp_bvh"]["median"] == pytest.approx(2.0)
+    assert rows["capacity c1 (64x3): DDF / warp_bvh"]["n"] == 2
+    assert "Seed 3 was stopped" in repeats.to_markdown(runs, list(rows.values()), paths)
+    only_one = repeats.pool([runs[0], {**runs[2], "ray_seed": 4}])
+    assert not any(r["quantity"].startswith("capacity") for r in only_one)

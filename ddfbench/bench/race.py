@@ -127,10 +127,17 @@ def device_tracers(ctx: Context, nsdf: NeuralSDF, gsdf: GridSDF, details: dict) 
                                                                      precision="tf32", compiled=True)
     made["grid_sdf_device_fp32"] = DeviceSphereTracer(gsdf.field, gsdf.domain, gsdf.trace_options)
     o, d = (torch.as_tensor(a, device=ctx.device) for a in incoherent_rays(4096, seed=5))
-    out = {}
+    out, first = {}, {}
     for name, tracer in made.items():
         try:
-            details.setdefault("cold", {})[f"{name}_first_4096_rays_s"] = timed(lambda: tracer(o, d))[1]
+            t, details.setdefault("cold", {})[f"{name}_first_4096_rays_s"] = timed(lambda: tracer(o, d))
+            first[name] = t.cpu().numpy()
+            reference = first.get("neural_sdf_device_fp32") if name.startswith("neural") else None
+            if reference is not None and name != "neural_sdf_device_fp32":  # tf32, bf16, compiled: as fp32 answers
+                diff = _diff(first[name], reference)
+                if diff["mask_disagreement"] > 0.02:
+                    raise ValueError(f"hit masks disagree with the fp32 tracer's on {diff['mask_disagreement']:.3f}")
+                details[f"{name}_vs_fp32_on_4096_rays"] = diff
             out[name] = tracer
         except Exception as err:  # the race goes on without it; the JSON says why
             details[name] = f"not run: {one_line(err)}"

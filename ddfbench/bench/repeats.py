@@ -26,16 +26,19 @@ REFERENCES = ("warp_bvh", "embree_all_cores", "neural_sdf_trace", "grid_sdf_trac
 
 
 def load_race(path: str) -> dict:
-    """The race section's details of one bench JSON; a one-line InputError naming the file when it has none."""
+    """The race section's details of one bench JSON (a race stopped by SIGTERM keeps what it measured: "_stopped"
+    says so); a one-line InputError naming the file when it has none or the race failed otherwise."""
     try:
         with open(path) as fh:
             doc = json.load(fh)
         race = doc["sections"]["race"]
     except (OSError, ValueError, KeyError, TypeError) as exc:
         raise InputError(f"{path}: not a bench JSON with a race section ({type(exc).__name__}: {exc})") from None
-    if race.get("error"):
-        raise InputError(f"{path}: its race failed ({race['error']})")
-    return {**race["details"], "_gpu": doc.get("env", {}).get("gpu"), "_commit": doc.get("env", {}).get("git_sha")}
+    error = race.get("error") or ""
+    if error and not error.startswith("Stopped"):
+        raise InputError(f"{path}: its race failed ({error})")
+    return {**race["details"], "_gpu": doc.get("env", {}).get("gpu"), "_commit": doc.get("env", {}).get("git_sha"),
+            "_stopped": bool(error)}
 
 
 def ratios(run: dict) -> dict[str, float]:
@@ -105,17 +108,20 @@ def fastest_names(runs: list[dict]) -> dict[str, list[str]]:
 
 
 def pool(runs: list[dict]) -> list[dict]:
-    """One row per quantity found in every run: n, median, mean, std, 95 % interval, values by ray seed."""
+    """One row per quantity found in at least two runs (a stopped run may lack the later ones): n, median, mean,
+    std, 95 % interval of the finite values, and the values by ray seed."""
     per_run = [ratios(r) for r in runs]
-    seeds = [r.get("ray_seed") for r in runs]
+    seeds = [str(r.get("ray_seed")) for r in runs]
+    keys = list(dict.fromkeys(k for p in per_run for k in p))
     rows = []
-    for key in per_run[0]:
-        values = [p.get(key) for p in per_run]
-        if any(v is None for v in values):
+    for key in keys:
+        values = {seed: p[key] for seed, p in zip(seeds, per_run) if key in p}
+        finite = [v for v in values.values() if v is not None and math.isfinite(v)]
+        if len(values) < 2:
             continue
-        s = summarize_values(values)
-        rows.append({"quantity": key, "n": s.n, "median": statistics.median(values), "mean": s.mean, "std": s.std,
-                     "lo": s.lo, "hi": s.hi, "values": dict(zip(map(str, seeds), values))})
+        s = summarize_values(finite)
+        rows.append({"quantity": key, "n": s.n, "median": statistics.median(finite) if finite else math.nan,
+                     "mean": s.mean, "std": s.std, "lo": s.lo, "hi": s.hi, "values": values})
     return rows
 
 
@@ -152,7 +158,9 @@ def _fmt(x: float) -> str:
 def to_markdown(runs: list[dict], rows: list[dict], paths: list[str]) -> str:
     head = [f"# The race repeated: {len(runs)} fresh processes, ray seeds {', '.join(str(r.get('ray_seed')) for r in runs)}",
             "", f"GPU: {runs[0].get('_gpu') or 'none (CPU)'}; commit {runs[0].get('_commit')}; runs: "
-            + ", ".join(f"`{os.path.basename(p)}`" for p in paths), "",
+            + ", ".join(f"`{os.path.basename(p)}`" for p in paths) + "."
+            + "".join(f" Seed {r.get('ray_seed')} was stopped by its time limit: it pools what it measured before."
+                      for r in runs if r.get("_stopped")), "",
             "Each value is formed inside one run from rates measured side by side on the same rays; across runs: "
             "median, mean ± std, and the 95 % t-interval of the mean in brackets (`python -m ddfbench.bench.repeats`).",
             "", *verdicts(rows), "", "The fastest variant in each run (the role's figures are its): "
