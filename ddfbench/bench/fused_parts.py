@@ -37,12 +37,13 @@ def kernel_flops(mlp) -> int:
     return 2 * (mlp.k0 * mlp.width + mlp.hidden * mlp.width * mlp.width + mlp.width * mlp.n_out)
 
 
-def dense_bf16_tflops(device: str, n: int = 8192, repeats: int = 10) -> float:
-    """TFLOP/s of one dense n x n x n bf16 product on random data (median of `repeats` after 3 warm-ups): the
-    matrix units' practical ceiling that a kernel's rate is read against (issue 51: 2 n^3 FLOPs a product)."""
+def dense_bf16_tflops(device: str, n: int = 8192, repeats: int = 20, warmup: int = 300) -> float:
+    """TFLOP/s of one dense n x n x n bf16 product on random data (median of `repeats` after `warmup` untimed
+    products, ~0.4 s on an H100, so the clocks have ramped up): the matrix units' practical ceiling that a
+    kernel's rate is read against (issue 51: 2 n^3 FLOPs a product)."""
     a = torch.randn(n, n, device=device, dtype=torch.bfloat16)
     b = torch.randn(n, n, device=device, dtype=torch.bfloat16)
-    timing = measure_side_by_side({"gemm": lambda: a @ b}, repeats, 3, device=device)["gemm"][1]
+    timing = measure_side_by_side({"gemm": lambda: a @ b}, repeats, warmup, device=device)["gemm"][1]
     return 2.0 * n**3 / timing.median_s / 1e12
 
 

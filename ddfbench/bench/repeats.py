@@ -46,7 +46,7 @@ def ratios(run: dict) -> dict[str, float]:
     out: dict[str, float] = {}
     for set_name in SETS:
         d = run.get(set_name)
-        if not d:
+        if not d or "fastest" not in d:  # not raced, or stopped while its figures were written
             continue
         # by role, so that a run whose fastest variant differs still pools (fastest_names says which it was)
         roles = {"DDF": d["fastest"]["ddf"], **{f"{kind} SDF device tracer": d["fastest"][f"{kind}_sdf"]
@@ -68,6 +68,8 @@ def ratios(run: dict) -> dict[str, float]:
             out[f"{set_name}: depth MAE {role}"] = d[roles[role]]["depth_mae"]
             out[f"{set_name}: mask IoU {role}"] = d[roles[role]]["mask_iou"]
     for level, c in (run.get("capacities") or {}).items():
+        if "fastest" not in c:
+            continue
         tag = f"capacity {level} ({c['width']}x{c['depth']})"
         best = c["fastest"]
         out[f"{tag}: DDF rays/s"] = c[best]["rays_per_s"]
@@ -162,7 +164,10 @@ def to_markdown(runs: list[dict], rows: list[dict], paths: list[str]) -> str:
             + "".join(f" Seed {r.get('ray_seed')} was stopped by its time limit: it pools what it measured before."
                       for r in runs if r.get("_stopped")), "",
             "Each value is formed inside one run from rates measured side by side on the same rays; across runs: "
-            "median, mean ± std, and the 95 % t-interval of the mean in brackets (`python -m ddfbench.bench.repeats`).",
+            "median, mean ± std, and the 95 % t-interval of the mean in brackets (`python -m ddfbench.bench.repeats`). "
+            "Cold rows: read them by seed; where the first run started with empty compile caches (Triton, "
+            "inductor, Warp) and the later ones found them on disk, only the first is a first launch and the "
+            "median is a relaunch's.",
             "", *verdicts(rows), "", "The fastest variant in each run (the role's figures are its): "
             + "; ".join(f"{k} {', '.join(sorted(set(v)))}" for k, v in fastest_names(runs).items()) + ".", "",
             "| quantity | n | median | mean ± std | 95 % interval | by ray seed |", "|---|---|---|---|---|---|"]

@@ -18,15 +18,16 @@ common="--device $dev --sizes ${SIZES:-default} --oracle-backend warp --repeats 
 prep=${PREPARED_DIR:-.devB/prepared}  # relative: no machine path in the reports
 pack() { tar -C /tmp -czf $OUT/res.tgz res; echo "$1 rc $2 at $(( $(date +%s) - T0 )) s"; }
 for k in 1 2 3 4 5; do
-  extra="" limit=${RACE1_S:-170}
-  [ $k = 1 ] || extra="--set race.compile=false" limit=${RACE_S:-85}
-  timeout -s TERM $limit python3 -m ddfbench.bench $common --only race --set race.ray_seed=$k --set race.sweep=[] $extra \
+  [ $(( $(date +%s) - T0 )) -lt ${LAST_RACE_AT:-440} ] || break  # leave the crossover its time in the call
+  extra="" limit=${RACE1_S:-150}
+  [ $k = 1 ] || extra="--set race.compile=false" limit=${RACE_S:-70}
+  timeout -k 10 -s TERM $limit python3 -m ddfbench.bench $common --only race --set race.ray_seed=$k --set race.sweep=[] $extra \
     --set race.prepared=$prep --set race.fit_steps=${FIT_STEPS:?} --out /tmp/res/seed$k > /tmp/res/seed$k.log 2>&1
   pack "race seed $k" $?; grep "^\[bench\] race:" /tmp/res/seed$k.log
 done
 python3 -m ddfbench.bench.repeats /tmp/res/seed*/bench-*.json --out /tmp/res > /tmp/res/repeats.log 2>&1
 pack repeats $?; cp /tmp/res/repeats.md $OUT/ 2>/dev/null; sed -n 7,9p /tmp/res/repeats.md
 big=""; [ $dev = cpu ] || big="--set crossover.px=1024 --set crossover.incoherent_rays=1048576"
-timeout -s TERM ${CROSS_S:-80} python3 -m ddfbench.bench $common --only crossover --set crossover.prepared=$prep $big \
+timeout -k 10 -s TERM ${CROSS_S:-70} python3 -m ddfbench.bench $common --only crossover --set crossover.prepared=$prep $big \
   --out /tmp/res/crossover > /tmp/res/crossover.log 2>&1
 pack crossover $?; grep "^\[bench\] crossover:" /tmp/res/crossover.log
