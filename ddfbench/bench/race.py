@@ -33,7 +33,9 @@ excluded (ddfbench.bench.timing). Absolute figures hold for the device named in 
 Sizes: shape, px, incoherent_rays, ray_seed, sweep (ray counts), embree_max (largest sweep count Embree runs),
 fit_seconds, fit_steps (0: by fit_seconds), prepared (folder or null), grid_resolution, n_samples (neural SDF
 samples), chunk (DDF rays per network call), compile (bool: the DDF's torch.compile variants), sdf_compile (bool:
-the neural SDF's device tracer compiled too, CUDA), capacities (bool), lods (triangle counts),
+the neural SDF's device tracer compiled too, CUDA), sdf_eager (bool: its eager device tracers), sdf_loops (bool:
+the numpy-in-and-out tracing loops), embree (bool: Embree on every core, and the reference; false: the oracle's
+answers are the reference), capacities (bool), lods (triangle counts),
 model / neural (overrides of the main DDF / neural SDF).
 """
 
@@ -125,9 +127,10 @@ def device_tracers(ctx: Context, nsdf: NeuralSDF, gsdf: GridSDF, details: dict) 
     # tf32 rounds the field by about 1e-4, above the preset's 1e-6 hit tolerance: it gets TF32_EPS_ABS (named in
     # details), as bf16 gets the tracer's eps_abs_bf16
     tf32_opts = dataclasses.replace(nsdf.trace_options, eps_abs=max(TF32_EPS_ABS, nsdf.trace_options.eps_abs))
+    eager = (["fp32", "tf32", "bf16"] if cuda else ["fp32", "bf16"]) if ctx.sizes.get("sdf_eager", True) else []
     made = {f"neural_sdf_device_{p}": DeviceSphereTracer(nsdf.field, nsdf.domain,
                                                          tf32_opts if p == "tf32" else nsdf.trace_options, precision=p)
-            for p in (["fp32", "tf32", "bf16"] if cuda else ["fp32", "bf16"])}
+            for p in eager}
     if cuda and ctx.sizes.get("sdf_compile"):
         made["neural_sdf_device_tf32_compiled"] = DeviceSphereTracer(nsdf.field, nsdf.domain, tf32_opts,
                                                                      precision="tf32", compiled=True)
@@ -139,7 +142,7 @@ def device_tracers(ctx: Context, nsdf: NeuralSDF, gsdf: GridSDF, details: dict) 
         try:
             t, details.setdefault("cold", {})[f"{name}_first_4096_rays_s"] = timed(lambda: tracer(o, d))
             first[name] = t.cpu().numpy()
-            reference = first.get("neural_sdf_device_fp32") if name.startswith("neural") else None
+            reference = first.get("neural_sdf_device_fp32") if name.startswith("neural") else None  # (when raced)
             if reference is not None and name != "neural_sdf_device_fp32":  # tf32, bf16, compiled: as fp32 answers
                 diff = _diff(first[name], reference)
                 if diff["mask_disagreement"] > 0.02:
@@ -286,12 +289,10 @@ def _race_all(ctx: Context, result: SectionResult, samples, ddf, nsdf, gsdf, war
     variants = ddf_variants(ctx, ddf, compile_too=True, details=result.details)
     tracers = device_tracers(ctx, nsdf, gsdf, result.details)
     contestants: dict[str, Callable] = {name: (lambda o, d, on, dn, f=f: f(o, d)) for name, f in {**variants, **tracers}.items()}
-    contestants.update({
-        "warp_bvh": lambda o, d, on, dn: warp.cast_torch(o, d)[0],
-        **embree,
-        "neural_sdf_trace": lambda o, d, on, dn: _sdf_t(nsdf, on, dn),
-        "grid_sdf_trace": lambda o, d, on, dn: _sdf_t(gsdf, on, dn),
-    })
+    contestants.update({"warp_bvh": lambda o, d, on, dn: warp.cast_torch(o, d)[0], **embree})
+    if s.get("sdf_loops", True):  # the numpy-in-and-out loop the device tracers are measured against
+        contestants.update({"neural_sdf_trace": lambda o, d, on, dn: _sdf_t(nsdf, on, dn),
+                            "grid_sdf_trace": lambda o, d, on, dn: _sdf_t(gsdf, on, dn)})
     ray_sets = {"primary": view_rays(int(s["px"]), eye=orbit_eye(seed)),
                 "incoherent": incoherent_rays(int(s["incoherent_rays"]), seed=seed)}
     for set_name, (o_np, d_np) in ray_sets.items():
@@ -319,7 +320,7 @@ def _race_all(ctx: Context, result: SectionResult, samples, ddf, nsdf, gsdf, war
         for ref in (r for r in refs if r in timed):
             result.rows.append(_rate_row(f"{set_name}: DDF ({best}) rays/s", timed[best][1], f"{ref} rays/s, same rays",
                                          timed[ref][1], n, ctx, note=note if ref == "warp_bvh" else ""))
-        for kind, name in fastest_sdf.items():  # the device-resident tracer against the numpy-in-and-out loop
+        for kind, name in ((k, v) for k, v in fastest_sdf.items() if f"{k}_trace" in timed):  # against the loop
             result.rows.append(_rate_row(
                 f"{set_name}: {kind} device tracer ({name}) rays/s", timed[name][1], f"{kind}_trace (intersect, "
                 "numpy in and out) rays/s, same rays", timed[f"{kind}_trace"][1], n, ctx,
@@ -349,6 +350,9 @@ def embree_all_cores(ctx: Context, oracle, mesh, result: SectionResult) -> tuple
     """({"embree_all_cores": contestant}, the pool to close or None): open3d's Embree through the oracle, or
     where the oracle is Warp's (a machine without open3d) embreex in one process per core; ({}, None) with
     the reason in result.details where neither is installed."""
+    if not ctx.sizes.get("embree", True):
+        result.details["embree_all_cores"] = "not run: embree=false (the depth reference is the oracle's)"
+        return {}, None
     if ctx.oracle_backend == "open3d":
         result.details["embree_all_cores"] = "open3d RaycastingScene (Embree on every core)"
         return {"embree_all_cores": lambda o, d, on, dn: oracle.hit_distance(on, dn)}, None
