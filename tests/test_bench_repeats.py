@@ -61,7 +61,8 @@ def test_pooling_gives_median_and_the_t_interval_by_hand():
 def test_the_verdict_names_the_most_accurate_capacity_faster_than_the_bvh():
     rows = repeats.pool([_run(k, 2.0) for k in (1, 2, 3)])
     lines = repeats.verdicts(rows)
-    assert "c2" in lines[0] and "c3" not in lines[0]  # c3 is more accurate but slower than the BVH
+    assert lines[0] == "Capacities measured in two runs or more: capacity c1 (64x3), capacity c2 (64x3), capacity c3 (64x3)."
+    assert "c2" in lines[1] and "c3" not in lines[1]  # c3 is more accurate but slower than the BVH
     assert any("mesh_lod_1000" in line and "0.3x the DDF's" in line for line in lines)
 
 
@@ -69,7 +70,7 @@ def test_no_capacity_faster_is_said(tmp_path):
     run = _run(1, 1.0)
     for cap in run["capacities"].values():
         cap["ddf_bf16"]["rays_per_s"] = 1e8
-    assert repeats.verdicts(repeats.pool([run, {**run, "ray_seed": 2}]))[0].startswith("No DDF capacity")
+    assert repeats.verdicts(repeats.pool([run, {**run, "ray_seed": 2}]))[1].startswith("No DDF capacity")
 
 
 def _write(path, details, error=None):
@@ -101,7 +102,7 @@ def test_ray_seeds_turn_the_camera_about_the_vertical_axis():
 
 def test_a_stopped_run_pools_what_it_measured(tmp_path):
     """A race stopped by its time limit before the capacities still adds its ray-set ratios; a quantity only one
-    run has is not pooled."""
+    run has gets no interval, and the capacity verdict reads only capacities measured twice or more."""
     cut = {k: v for k, v in _run(3, 3.0).items() if k != "capacities"}
     paths = [_write(tmp_path / "r1.json", _run(1, 1.0)), _write(tmp_path / "r2.json", _run(2, 2.0)),
              _write(tmp_path / "r3.json", cut, error="Stopped: SIGTERM: the bench was stopped midway")]
@@ -109,6 +110,8 @@ def test_a_stopped_run_pools_what_it_measured(tmp_path):
     rows = {r["quantity"]: r for r in repeats.pool(runs)}
     assert rows["primary: DDF / warp_bvh"]["n"] == 3 and rows["primary: DDF / warp_bvh"]["median"] == pytest.approx(2.0)
     assert rows["capacity c1 (64x3): DDF / warp_bvh"]["n"] == 2
-    assert "Seed 3 was stopped" in repeats.to_markdown(runs, list(rows.values()), paths)
-    only_one = repeats.pool([runs[0], {**runs[2], "ray_seed": 4}])
-    assert not any(r["quantity"].startswith("capacity") for r in only_one)
+    assert "time limits, pooling what they measured before: seeds 3." in repeats.to_markdown(runs, list(rows.values()), paths)
+    only_one = repeats.pool([runs[0], {**runs[2], "ray_seed": 4}])  # a capacity measured once: n 1, no interval
+    caps = [r for r in only_one if r["quantity"].startswith("capacity")]
+    assert caps and all(r["n"] == 1 and math.isnan(r["lo"]) for r in caps)
+    assert repeats.verdicts(only_one)[0] == "Capacities measured in two runs or more: none."

@@ -387,3 +387,30 @@ def test_the_same_encoding_row_asks_whether_the_grid_pair_is_as_accurate(grid_ga
     closed = grid_gap / 10 * (1.1 ** 2 * 0.9 ** 2) ** (1 / 3)
     assert f"grid ratio / MLP ratio {closed:.3g}×" in row.measured
     assert verdicts({})["the DDF's gap to the SDF closes with the same encoding"] == claims.NO_RECORDS
+
+
+def test_the_gpu_race_claims_read_the_committed_repeats_file(tmp_path):
+    """reports/bench/cuda/h200/repeats.json (bench.repeats) gives the GPU rows: geometric mean over runs with the
+    t interval of the logs, confirmed only when both ray sets lie above 1; no file: no records."""
+    import json
+    import math
+    import os
+
+    from ddfbench.report import claims as cl
+
+    def row(q, values):
+        return {"quantity": q, "n": len(values), "values": {str(i): v for i, v in enumerate(values, 1)}, "median": 0}
+
+    rows = [row("primary: DDF / warp_bvh", [2.0, 4.0, 3.0]), row("incoherent: DDF / warp_bvh", [3.0, 3.5, 4.0]),
+            row("primary: DDF / neural SDF device tracer", [0.5, 2.0, 1.0]),
+            row("incoherent: DDF / neural SDF device tracer", [300.0, 320.0, 310.0])]
+    path = tmp_path / cl.GPU_RACE_FILE
+    os.makedirs(path.parent)
+    path.write_text(json.dumps({"rows": rows}))
+    out = {c.claim: c for c in cl.renders_faster_on_gpu(cl.load_committed(str(tmp_path)))}
+    bvh = out["DDF renders faster than a GPU BVH (Warp)"]
+    assert bvh.verdict == cl.CONFIRMED and f"primary rays {24 ** (1 / 3):.3g}×" in bvh.measured  # (2*4*3)^(1/3)
+    assert out["DDF renders faster than the neural SDF, sphere traced on the GPU"].verdict == cl.NOT_SEPARABLE
+    assert out["DDF renders faster than the grid SDF, sphere traced on the GPU"].verdict == cl.NO_RECORDS
+    assert math.isclose(float(bvh.measured.split("incoherent rays ")[1].split("×")[0]), (3 * 3.5 * 4) ** (1 / 3), rel_tol=1e-2)
+    assert all(c.verdict == cl.NO_RECORDS for c in cl.renders_faster_on_gpu(cl.load_committed(str(tmp_path / "none"))))

@@ -110,8 +110,8 @@ def fastest_names(runs: list[dict]) -> dict[str, list[str]]:
 
 
 def pool(runs: list[dict]) -> list[dict]:
-    """One row per quantity found in at least two runs (a stopped run may lack the later ones): n, median, mean,
-    std, 95 % interval of the finite values, and the values by ray seed."""
+    """One row per quantity found in any run (a stopped or shorter run may lack some): n, median, mean, std and
+    95 % interval of the finite values (no std or interval for n = 1), and the values by ray seed."""
     per_run = [ratios(r) for r in runs]
     seeds = [str(r.get("ray_seed")) for r in runs]
     keys = list(dict.fromkeys(k for p in per_run for k in p))
@@ -119,8 +119,6 @@ def pool(runs: list[dict]) -> list[dict]:
     for key in keys:
         values = {seed: p[key] for seed, p in zip(seeds, per_run) if key in p}
         finite = [v for v in values.values() if v is not None and math.isfinite(v)]
-        if len(values) < 2:
-            continue
         s = summarize_values(finite)
         rows.append({"quantity": key, "n": s.n, "median": statistics.median(finite) if finite else math.nan,
                      "mean": s.mean, "std": s.std, "lo": s.lo, "hi": s.hi, "values": values})
@@ -131,15 +129,16 @@ def verdicts(rows: list[dict]) -> list[str]:
     """The capacity claim: the most accurate capacity whose interval of DDF / warp_bvh lies above 1 (or that
     none does), and the LODs' depth error and speed against it."""
     by = {r["quantity"]: r for r in rows}
-    caps = sorted({q.split(":")[0] for q in by if q.startswith("capacity ")})
-    faster = [c for c in caps if f"{c}: DDF / warp_bvh" in by and by[f"{c}: DDF / warp_bvh"]["lo"] > 1.0]
-    lines = []
+    caps = sorted({q.split(":")[0] for q, r in by.items()
+                   if q.startswith("capacity ") and q.endswith(": DDF / warp_bvh") and r["n"] >= 2})
+    faster = [c for c in caps if by[f"{c}: DDF / warp_bvh"]["lo"] > 1.0]
+    lines = [f"Capacities measured in two runs or more: {', '.join(caps) or 'none'}."]
     if not faster:
-        lines.append("No DDF capacity is faster than the BVH with its whole 95 % interval above 1.")
+        lines.append("No DDF capacity measured is faster than the BVH with its whole 95 % interval above 1.")
     else:
         best = min(faster, key=lambda c: by[f"{c}: depth MAE"]["median"])
         r, mae = by[f"{best}: DDF / warp_bvh"], by[f"{best}: depth MAE"]
-        lines.append(f"The most accurate DDF faster than the BVH: {best}, {sig3(r['median'])}x the BVH's rays/s "
+        lines.append(f"The most accurate of them faster than the BVH: {best}, {sig3(r['median'])}x the BVH's rays/s "
                      f"[{sig3(r['lo'])}, {sig3(r['hi'])}], depth MAE {mae['median']:.2e} (median of {r['n']} runs).")
         for q in (q for q in by if q.startswith(f"{best}: DDF / mesh_lod_")):
             lod = q.split("/ ")[1]
@@ -158,11 +157,12 @@ def _fmt(x: float) -> str:
 
 
 def to_markdown(runs: list[dict], rows: list[dict], paths: list[str]) -> str:
+    stopped = [str(r.get("ray_seed")) for r in runs if r.get("_stopped")]
     head = [f"# The race repeated: {len(runs)} fresh processes, ray seeds {', '.join(str(r.get('ray_seed')) for r in runs)}",
-            "", f"GPU: {runs[0].get('_gpu') or 'none (CPU)'}; commit {runs[0].get('_commit')}; runs: "
-            + ", ".join(f"`{os.path.basename(p)}`" for p in paths) + "."
-            + "".join(f" Seed {r.get('ray_seed')} was stopped by its time limit: it pools what it measured before."
-                      for r in runs if r.get("_stopped")), "",
+            "", f"GPU: {', '.join(sorted({str(r.get('_gpu') or 'none (CPU)') for r in runs}))}; runs (commit): "
+            + ", ".join(f"`{os.path.basename(p)}` ({str(r.get('_commit'))[:7]})" for p, r in zip(paths, runs)) + "."
+            + (f" Stopped by their time limits, pooling what they measured before: seeds {', '.join(stopped)}."
+               if stopped else ""), "",
             "Each value is formed inside one run from rates measured side by side on the same rays; across runs: "
             "median, mean ± std, and the 95 % t-interval of the mean in brackets (`python -m ddfbench.bench.repeats`). "
             "Cold rows: read them by seed; where the first run started with empty compile caches (Triton, "

@@ -26,6 +26,7 @@ Papers: DDF = ../shared/papers/000_* (Behera & Mishra), thesis = 001_* (Zeng 201
 
 from __future__ import annotations
 
+import json
 import math
 import os
 import re
@@ -64,6 +65,8 @@ KAOLIN_NOTE = ("Paper: Kaolin chamfer (squared, summed) ×10³ on its own normal
                "ours: the same formula on {n} points per surface in the unit cube (longest side 1), so "
                "absolute values compare only up to the unknown scale².")
 Records = dict[str, list[dict[str, Any]]]
+GPU_RACE = "gpu_race"  # Records' key for the GPU race repeated: the rows of reports/<GPU_RACE_FILE> (bench.repeats)
+GPU_RACE_FILE = os.path.join("bench", "cuda", "h200", "repeats.json")
 
 
 @dataclass
@@ -456,6 +459,40 @@ def renders_faster_matched(records: Records) -> list[Claim]:
                   "family's fastest tracer setting / LOD whose depth error is at most the DDF's.")]
 
 
+def renders_faster_on_gpu(records: Records) -> list[Claim]:
+    """Fig. 5 on a GPU, depth only: the bench's race repeated in fresh processes with distinct ray seeds
+    (ddfbench.bench.repeats; records[GPU_RACE]: its pooled rows), the DDF's fastest variant against Warp's BVH and
+    against sphere tracing each SDF on the device (the device-resident tracer), on 1M primary and 1M incoherent
+    rays; every ratio within one process on the same rays."""
+    src, paper = "DDF Fig. 5, §VII", "DDF renders faster than BVH meshes and SDFs, on an RTX 3090"
+    rows = {r["quantity"]: r for r in records.get(GPU_RACE) or []}
+    out = []
+    for other, role in (("a GPU BVH (Warp)", "warp_bvh"), ("the neural SDF, sphere traced on the GPU",
+                                                            "neural SDF device tracer"),
+                        ("the grid SDF, sphere traced on the GPU", "grid SDF device tracer")):
+        name = f"DDF renders faster than {other}"
+        found = [rows.get(f"{s}: DDF / {role}") for s in ("primary", "incoherent")]
+        if not all(found):
+            out.append(Claim(name, src, paper, "–", f"`reports/{GPU_RACE_FILE}`", NO_RECORDS,
+                             "needs a GPU: tools/device/run_repeats.sh, then python -m ddfbench.bench.repeats"))
+            continue
+        logs = [summarize_values(math.log(v) for v in r["values"].values()) for r in found]  # geometric, as above
+        sides = ["above" if g.lo > 0 else "below" if g.hi < 0 else "straddles" for g in logs]
+        verdict = CONFIRMED if sides == ["above"] * 2 else REFUTED if sides == ["below"] * 2 else NOT_SEPARABLE
+        mae = [rows.get(f"{s}: depth MAE {k}") for s in ("primary",) for k in ("DDF", role)]
+        out.append(Claim(
+            name, src, paper, "; ".join(f"{s} rays {sig3(math.exp(g.mean))}× [{sig3(math.exp(g.lo))}, "
+                                        f"{sig3(math.exp(g.hi))}] (n={g.n} runs)"
+                                        for s, g in zip(("primary", "incoherent"), logs)),
+            f"`reports/{GPU_RACE_FILE[:-5]}.md` rows '… DDF / {role}' (NVIDIA H200, 5 fresh processes)", verdict,
+            "Rays/s ratios of the DDF's fastest variant (the one-kernel bf16 depth) over the other, each formed in "
+            "one process on the same 1,048,576 rays; geometric mean over runs (ray seeds), 95 % t-interval. Depth "
+            "only, and not at equal accuracy: " + (f"primary-ray depth MAE DDF {mae[0]['median']:.2g}, {role} "
+                                                   f"{mae[1]['median']:.2g} (medians)." if all(mae)
+                                                   else "see the report's depth MAE rows.")))
+    return out
+
+
 def render_costs(records: Records) -> list[Claim]:
     """Fig. 5's slower first frame, §I's constant-time query against a BVH's growing one, and §IV-B's normals from
     autograd, from the render records (frames(): over the evaluation shapes, else the bunny's seeds)."""
@@ -645,7 +682,7 @@ def thesis_2d(records: Records) -> list[Claim]:
 CLAIMS: tuple[Callable[[Records], list[Claim]], ...] = (
     table2_ordering, fig6_ordering, table1_bunny, table1_others, accurate_as_sdf, accurate_as_sdf_over_shapes,
     gap_with_the_same_encoding,
-    renders_faster, render_costs, thesis_storage, thesis_summary, thesis_2d, untested_sources)
+    renders_faster, renders_faster_on_gpu, render_costs, thesis_storage, thesis_summary, thesis_2d, untested_sources)
 
 
 def evaluate(records: Records) -> list[Claim]:
@@ -663,7 +700,12 @@ def load_committed(reports: str) -> Records:
     """{experiment: records} from each report's committed compact records, reports/<experiment>/records.jsonl.gz
     (no file: empty)."""
     path = lambda e: os.path.join(reports, e, compact.FILE)  # noqa: E731
-    return {e: compact.read_compact(path(e)) if os.path.isfile(path(e)) else [] for e in EXPERIMENTS}
+    records = {e: compact.read_compact(path(e)) if os.path.isfile(path(e)) else [] for e in EXPERIMENTS}
+    gpu_race = os.path.join(reports, GPU_RACE_FILE)
+    if os.path.isfile(gpu_race):
+        with open(gpu_race) as fh:
+            records[GPU_RACE] = json.load(fh)["rows"]
+    return records
 
 
 CARRIED = "† "  # the mark of a row carried from the previous claims.md
@@ -707,7 +749,7 @@ def to_markdown(claims: list[Claim], records: Records, source: str, carried_from
                 carried_codes: tuple[str, ...] = (), command: str | None = None) -> str:
     """claims.md: a header (command, code commits, interval) and one row per claim; rows marked † were
     carried from `carried_from` (code: carried_codes)."""
-    shas = code_commits([r for rs in records.values() for r in rs])
+    shas = code_commits([r for e, rs in records.items() if e != GPU_RACE for r in rs])  # the GPU race names its own
     cell = lambda t: str(t).replace("|", "\\|")  # noqa: E731
     command = command or (f"python -m ddfbench.report --claims {source}"
                           + (f" --carry {carried_from}" if carried_from else ""))
