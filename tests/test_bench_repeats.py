@@ -54,7 +54,7 @@ def test_pooling_gives_median_and_the_t_interval_by_hand():
     row = rows["primary: DDF / warp_bvh"]
     half = 4.302652729911275 * 1.0 / math.sqrt(3)  # t(0.975, 2) * std / sqrt(n), std of 1, 2, 3 = 1
     assert row["n"] == 3 and row["median"] == pytest.approx(2.0) and row["std"] == pytest.approx(1.0)
-    assert (row["lo"], row["hi"]) == (pytest.approx(2.0 - half), pytest.approx(2.0 + half))
+    assert (row["lo"], row["hi"]) == (0.0, pytest.approx(2.0 + half))  # 2 - half < 0: cut at 0 (a ratio)
     assert row["values"] == {"1": pytest.approx(1.0), "2": pytest.approx(2.0), "3": pytest.approx(3.0)}
 
 
@@ -115,3 +115,20 @@ def test_a_stopped_run_pools_what_it_measured(tmp_path):
     caps = [r for r in only_one if r["quantity"].startswith("capacity")]
     assert caps and all(r["n"] == 1 and math.isnan(r["lo"]) for r in caps)
     assert repeats.verdicts(only_one)[0] == "Capacities measured in two runs or more: none."
+
+
+def test_capacity_variants_are_named_when_the_first_run_has_none_and_ratios_pool_geometrically():
+    first = {k: v for k, v in _run(1, 1.0).items() if k != "capacities"}
+    names = repeats.fastest_names([first, _run(2, 2.0), _run(3, 2.0)])
+    assert names["capacity c1"] == ["ddf_bf16", "ddf_bf16"]
+    row = {r["quantity"]: r for r in repeats.pool([_run(1, 1.0), _run(2, 4.0)])}["primary: DDF / warp_bvh"]
+    assert row["gmean"] == pytest.approx(2.0) and row["glo"] < 2.0 < row["ghi"]  # sqrt(1 * 4)
+    cold = {r["quantity"]: r for r in repeats.pool([_run(1, 1.0), _run(2, 4.0)])}["cold: warp_bvh_build_s"]
+    assert math.isnan(cold["lo"]) and cold["median"] == pytest.approx(0.015)  # first launch and relaunch mixed
+
+
+def test_runs_of_different_networks_are_not_pooled(tmp_path, capsys):
+    a, b = _run(1, 1.0), _run(2, 1.0)
+    a["ddf"], b["ddf"] = {"prepared": "ddf_tuned-128x4-aaaa"}, {"prepared": "ddf_tuned-128x4-bbbb"}
+    paths = [_write(tmp_path / "a.json", a), _write(tmp_path / "b.json", b)]
+    assert repeats.main(paths) == 2 and "raced different ddf networks" in capsys.readouterr().err

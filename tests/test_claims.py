@@ -406,10 +406,19 @@ def test_the_gpu_race_claims_read_the_committed_repeats_file(tmp_path):
             row("incoherent: DDF / neural SDF device tracer", [300.0, 320.0, 310.0])]
     path = tmp_path / cl.GPU_RACE_FILE
     os.makedirs(path.parent)
-    path.write_text(json.dumps({"rows": rows}))
+    rows += [row("capacity c2 (128x4): DDF / mesh_lod_1000", [1.0, 1.2, 0.9]),
+             row("capacity c2 (128x4): DDF / mesh_lod_4000", [1.5, 1.4, 1.6]),
+             {**row("capacity c2 (128x4): depth MAE", [0.02] * 3), "median": 0.02},
+             {**row("mesh_lod_1000: depth MAE (primary)", [0.004] * 3), "median": 0.004},
+             {**row("primary: depth MAE DDF", [0.02] * 3), "median": 0.02}]
+    path.write_text(json.dumps({"rows": rows, "gpu": ["GPU X"], "runs": ["a", "b", "c"], "commits": ["abc1234"] * 3}))
     out = {c.claim: c for c in cl.renders_faster_on_gpu(cl.load_committed(str(tmp_path)))}
     bvh = out["DDF renders faster than a GPU BVH (Warp)"]
     assert bvh.verdict == cl.CONFIRMED and f"primary rays {24 ** (1 / 3):.3g}×" in bvh.measured  # (2*4*3)^(1/3)
+    assert "GPU X, 3 fresh processes, code abc1234" in bvh.rows
+    # the coarsest LOD beside capacity c2, at 0.02 / 0.004 = 5x the LOD's depth error; the 4k LOD is not quoted
+    assert f"the 1000-triangle LOD {1.08 ** (1 / 3):.3g}×" in bvh.convention and "5× the LOD's" in bvh.convention
+    assert "4000-triangle" not in bvh.convention
     assert out["DDF renders faster than the neural SDF, sphere traced on the GPU"].verdict == cl.NOT_SEPARABLE
     assert out["DDF renders faster than the grid SDF, sphere traced on the GPU"].verdict == cl.NO_RECORDS
     assert math.isclose(float(bvh.measured.split("incoherent rays ")[1].split("×")[0]), (3 * 3.5 * 4) ** (1 / 3), rel_tol=1e-2)

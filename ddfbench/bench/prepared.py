@@ -5,8 +5,9 @@ saved there and makes and saves what is missing. So repeated runs of a section i
 the race in five processes with five ray seeds) time the same networks on new rays, a fit is fixed work done
 once rather than wall-clock work done per run, and a GPU machine without pymeshlab gets LODs made elsewhere.
 A file is named by what it holds and a hash of what made it (preset config and fit budget), so a changed
-preset or budget makes a new file instead of reading a stale one. Without the key, everything is made in
-the process and nothing is written.
+preset or budget makes a new file instead of reading a stale one; the code that made it is not in the hash, so
+a change to a family's code reuses the old files (start a new folder). Without the key, everything is made in the
+process and nothing is written.
 """
 
 from __future__ import annotations

@@ -28,7 +28,8 @@ Cold costs (details "cold" and each contestant's cold_s): BVH builds (Warp; Embr
 start), loads, and every contestant's first call (kernel compile and autotune, Warp's module load).
 Accuracy: depth MAE on rays both the contestant and the reference hit, and mask IoU, against Embree on
 the same rays (the open3d oracle, or with `--oracle-backend warp` the embreex pool, so that warp_bvh is
-never scored against itself; Warp's own answers only where embreex is missing too, as details say). Every timed call is synchronized (ddfbench.core.clock.clock), warm-up
+not scored against itself; Warp's own answers only where embreex is missing or `embree` is false, as details'
+"reference" says). Every timed call is synchronized (ddfbench.core.clock.clock), warm-up
 excluded (ddfbench.bench.timing). Absolute figures hold for the device named in the JSON's env.
 Sizes: shape, px, incoherent_rays, ray_seed, sweep (ray counts), embree_max (largest sweep count Embree runs),
 fit_seconds, fit_steps (0: by fit_seconds), prepared (folder or null), grid_resolution, n_samples (neural SDF
@@ -266,7 +267,9 @@ def run(ctx: Context) -> SectionResult:
     warp, cold["warp_bvh_build_s"] = timed(lambda: WarpCaster(shape.mesh.vertices, shape.mesh.faces, ctx.device))
     lods = lod_casters(ctx, shape.mesh, WarpCaster, result.details)
 
-    (embree, pool), cold["embree_pool_start_s"] = timed(lambda: embree_all_cores(ctx, oracle, shape.mesh, result))
+    (embree, pool), started_s = timed(lambda: embree_all_cores(ctx, oracle, shape.mesh, result))
+    if pool is not None:  # the 16 workers' start (open3d's Embree builds inside its first cast)
+        cold["embree_pool_start_s"] = started_s
     if importlib.util.find_spec("embreex") is not None:
         from ddfbench.truth.oracle import Oracle
 

@@ -41,6 +41,15 @@ def load_race(path: str) -> dict:
             "_stopped": bool(error)}
 
 
+def check_same_networks(runs: list[dict], paths: list[str]) -> None:
+    """A one-line InputError unless every run raced the same prepared networks (details' "prepared" names, where
+    the runs loaded them: pooling runs of different networks would mix two experiments)."""
+    for part in ("ddf", "neural_sdf"):
+        names = {str((r.get(part) or {}).get("prepared")) for r in runs}
+        if len(names) > 1:
+            raise InputError(f"{', '.join(paths)}: the runs raced different {part} networks ({sorted(names)})")
+
+
 def ratios(run: dict) -> dict[str, float]:
     """{quantity: value} of one run: rates and ratios of rates measured side by side in that run."""
     out: dict[str, float] = {}
@@ -57,6 +66,9 @@ def ratios(run: dict) -> dict[str, float]:
         for role, name in roles.items():
             if role != "DDF":
                 out[f"{set_name}: DDF / {role}"] = rate / d[name]["rays_per_s"]
+        if "neural SDF device tracer" in roles and "ddf_bf16" in d:  # the method's gap without the DDF's fusion
+            out[f"{set_name}: unfused bf16 DDF / neural SDF device tracer"] = (
+                d["ddf_bf16"]["rays_per_s"] / d[roles["neural SDF device tracer"]]["rays_per_s"])
         bare = f"ddf_bare_{'bf16' if 'bf16' in roles['DDF'] else 'fp32'}"
         out[f"{set_name}: DDF / its bare forward"] = rate / d[bare]["rays_per_s"]
         for kind, loop in (("neural", "neural_sdf_trace"), ("grid", "grid_sdf_trace")):
@@ -64,7 +76,7 @@ def ratios(run: dict) -> dict[str, float]:
                 out[f"{set_name}: {kind} SDF device tracer / {loop}"] = (
                     d[roles[f"{kind} SDF device tracer"]]["rays_per_s"] / d[loop]["rays_per_s"])
         for role in (r for r in ("DDF", "warp_bvh", "neural SDF device tracer", "grid SDF device tracer",
-                                 "neural_sdf_trace") if r in roles):
+                                 "neural_sdf_trace", "grid_sdf_trace") if r in roles):
             out[f"{set_name}: depth MAE {role}"] = d[roles[role]]["depth_mae"]
             out[f"{set_name}: mask IoU {role}"] = d[roles[role]]["mask_iou"]
     for level, c in (run.get("capacities") or {}).items():
@@ -104,14 +116,24 @@ def fastest_names(runs: list[dict]) -> dict[str, list[str]]:
             names = [r[set_name]["fastest"][role] for r in runs if role in r.get(set_name, {}).get("fastest", {})]
             if names:
                 out[f"{set_name}: {role}"] = names
-    for level in (runs[0].get("capacities") or {}):
-        out[f"capacity {level}"] = [r["capacities"][level]["fastest"] for r in runs if level in (r.get("capacities") or {})]
+    levels = dict.fromkeys(level for r in runs for level in (r.get("capacities") or {}))
+    for level in levels:
+        names = [r["capacities"][level]["fastest"] for r in runs if "fastest" in (r.get("capacities") or {}).get(level, {})]
+        if names:
+            out[f"capacity {level}"] = names
     return out
+
+
+def is_ratio(quantity: str) -> bool:
+    """A ratio of two rates (its runs pool as a geometric mean too)."""
+    return " / " in quantity
 
 
 def pool(runs: list[dict]) -> list[dict]:
     """One row per quantity found in any run (a stopped or shorter run may lack some): n, median, mean, std and
-    95 % interval of the finite values (no std or interval for n = 1), and the values by ray seed."""
+    95 % interval of the finite values (no std or interval for n = 1; the interval cut at 0, and at 1 for IoUs and
+    shares; none for cold costs, whose runs mix first launches and relaunches), for ratios also the geometric mean
+    and the interval of the logs (gmean, glo, ghi: what claims.md quotes), and the values by ray seed."""
     per_run = [ratios(r) for r in runs]
     seeds = [str(r.get("ray_seed")) for r in runs]
     keys = list(dict.fromkeys(k for p in per_run for k in p))
@@ -120,34 +142,46 @@ def pool(runs: list[dict]) -> list[dict]:
         values = {seed: p[key] for seed, p in zip(seeds, per_run) if key in p}
         finite = [v for v in values.values() if v is not None and math.isfinite(v)]
         s = summarize_values(finite)
-        rows.append({"quantity": key, "n": s.n, "median": statistics.median(finite) if finite else math.nan,
-                     "mean": s.mean, "std": s.std, "lo": s.lo, "hi": s.hi, "values": values})
+        lo, hi = max(s.lo, 0.0), (min(s.hi, 1.0) if "IoU" in key or "share" in key else s.hi)
+        if key.startswith("cold:"):
+            lo = hi = math.nan
+        row = {"quantity": key, "n": s.n, "median": statistics.median(finite) if finite else math.nan,
+               "mean": s.mean, "std": s.std, "lo": lo if s.n > 1 else math.nan, "hi": hi if s.n > 1 else math.nan,
+               "values": values}
+        if is_ratio(key):
+            g = summarize_values(math.log(v) for v in finite if v > 0)
+            row.update(gmean=math.exp(g.mean), glo=math.exp(g.lo), ghi=math.exp(g.hi))
+        rows.append(row)
     return rows
 
 
 def verdicts(rows: list[dict]) -> list[str]:
-    """The capacity claim: the most accurate capacity whose interval of DDF / warp_bvh lies above 1 (or that
-    none does), and the LODs' depth error and speed against it."""
+    """The capacity claim: the most accurate capacity measured in two runs or more whose DDF / warp_bvh interval
+    (geometric) lies above 1 (or that none does), and the LODs' depth error and speed against it."""
     by = {r["quantity"]: r for r in rows}
     caps = sorted({q.split(":")[0] for q, r in by.items()
                    if q.startswith("capacity ") and q.endswith(": DDF / warp_bvh") and r["n"] >= 2})
-    faster = [c for c in caps if by[f"{c}: DDF / warp_bvh"]["lo"] > 1.0]
+    faster = [c for c in caps if by[f"{c}: DDF / warp_bvh"]["glo"] > 1.0]
     lines = [f"Capacities measured in two runs or more: {', '.join(caps) or 'none'}."]
     if not faster:
         lines.append("No DDF capacity measured is faster than the BVH with its whole 95 % interval above 1.")
     else:
         best = min(faster, key=lambda c: by[f"{c}: depth MAE"]["median"])
         r, mae = by[f"{best}: DDF / warp_bvh"], by[f"{best}: depth MAE"]
-        lines.append(f"The most accurate of them faster than the BVH: {best}, {sig3(r['median'])}x the BVH's rays/s "
-                     f"[{sig3(r['lo'])}, {sig3(r['hi'])}], depth MAE {mae['median']:.2e} (median of {r['n']} runs).")
+        lines.append(f"The most accurate of them faster than the BVH: {best}, {_geo(r)} the BVH's rays/s, depth MAE "
+                     f"{mae['median']:.2e} (median; {r['n']} runs).")
         for q in (q for q in by if q.startswith(f"{best}: DDF / mesh_lod_")):
             lod = q.split("/ ")[1]
             lod_mae = by.get(f"{lod}: depth MAE (primary)")
             if lod_mae:
                 lines.append(f"- {lod}: depth MAE {lod_mae['median']:.2e} ({lod_mae['median'] / mae['median']:.3g}x the "
-                             f"DDF's); the DDF answers {sig3(by[q]['median'])}x its rays/s [{sig3(by[q]['lo'])}, "
-                             f"{sig3(by[q]['hi'])}].")
+                             f"DDF's); the DDF answers {_geo(by[q])} its rays/s.")
     return lines
+
+
+def _geo(row: dict) -> str:
+    """'3.35x [2.44, 4.59] (geometric mean)' of a ratio row."""
+    return f"{sig3(row['gmean'])}x [{sig3(row['glo'])}, {sig3(row['ghi'])}] (geometric mean)"
 
 
 def _fmt(x: float) -> str:
@@ -164,16 +198,19 @@ def to_markdown(runs: list[dict], rows: list[dict], paths: list[str]) -> str:
             + (f" Stopped by their time limits, pooling what they measured before: seeds {', '.join(stopped)}."
                if stopped else ""), "",
             "Each value is formed inside one run from rates measured side by side on the same rays; across runs: "
-            "median, mean ± std, and the 95 % t-interval of the mean in brackets (`python -m ddfbench.bench.repeats`). "
+            "median, mean ± std, and the 95 % t-interval of the mean in brackets (`python -m ddfbench.bench.repeats`); "
+            "for ratios also the geometric mean with the t-interval of the logs (what `reports/claims.md` quotes). "
             "Cold rows: read them by seed; where the first run started with empty compile caches (Triton, "
             "inductor, Warp) and the later ones found them on disk, only the first is a first launch and the "
             "median is a relaunch's.",
             "", *verdicts(rows), "", "The fastest variant in each run (the role's figures are its): "
             + "; ".join(f"{k} {', '.join(sorted(set(v)))}" for k, v in fastest_names(runs).items()) + ".", "",
-            "| quantity | n | median | mean ± std | 95 % interval | by ray seed |", "|---|---|---|---|---|---|"]
+            "| quantity | n | median | mean ± std | 95 % interval | geometric mean [95 %] | by ray seed |",
+            "|---|---|---|---|---|---|---|"]
     body = [f"| {r['quantity']} | {r['n']} | {_fmt(r['median'])} | {_fmt(r['mean'])} ± {_fmt(r['std'])} | "
-            f"[{_fmt(r['lo'])}, {_fmt(r['hi'])}] | {', '.join(f'{k}: {_fmt(v)}' for k, v in r['values'].items())} |"
-            for r in rows]
+            f"[{_fmt(r['lo'])}, {_fmt(r['hi'])}] | "
+            + (f"{_fmt(r['gmean'])} [{_fmt(r['glo'])}, {_fmt(r['ghi'])}]" if "gmean" in r else "")
+            + f" | {', '.join(f'{k}: {_fmt(v)}' for k, v in r['values'].items())} |" for r in rows]
     return "\n".join(head + body) + "\n"
 
 
@@ -187,6 +224,7 @@ def main(argv: list[str] | None = None) -> int:
         seeds = [r.get("ray_seed") for r in runs]
         if len(set(seeds)) != len(seeds):
             raise InputError(f"ray seeds {seeds}: each run needs its own (--set race.ray_seed=K)")
+        check_same_networks(runs, args.runs)
     except InputError as err:
         print(f"ddfbench.bench.repeats: {err}", file=sys.stderr)
         return 2
@@ -197,7 +235,9 @@ def main(argv: list[str] | None = None) -> int:
     with open(os.path.join(out, "repeats.md"), "w") as fh:
         fh.write(md)
     with open(os.path.join(out, "repeats.json"), "w") as fh:
-        json.dump({"runs": [os.path.basename(p) for p in args.runs], "seeds": seeds, "rows": rows}, fh, indent=1)
+        json.dump({"runs": [os.path.basename(p) for p in args.runs], "seeds": seeds,
+                   "commits": [str(r.get("_commit"))[:7] for r in runs], "gpu": sorted({str(r.get("_gpu")) for r in runs}),
+                   "references": [r.get("reference") for r in runs], "rows": rows}, fh, indent=1)
     print(md)
     return 0
 

@@ -65,7 +65,7 @@ KAOLIN_NOTE = ("Paper: Kaolin chamfer (squared, summed) ×10³ on its own normal
                "ours: the same formula on {n} points per surface in the unit cube (longest side 1), so "
                "absolute values compare only up to the unknown scale².")
 Records = dict[str, list[dict[str, Any]]]
-GPU_RACE = "gpu_race"  # Records' key for the GPU race repeated: the rows of reports/<GPU_RACE_FILE> (bench.repeats)
+GPU_RACE = "gpu_race"  # Records' key for the GPU race repeated: [reports/<GPU_RACE_FILE>'s document] (bench.repeats)
 GPU_RACE_FILE = os.path.join("bench", "cuda", "h200", "repeats.json")
 
 
@@ -465,7 +465,10 @@ def renders_faster_on_gpu(records: Records) -> list[Claim]:
     against sphere tracing each SDF on the device (the device-resident tracer), on 1M primary and 1M incoherent
     rays; every ratio within one process on the same rays."""
     src, paper = "DDF Fig. 5, §VII", "DDF renders faster than BVH meshes and SDFs, on an RTX 3090"
-    rows = {r["quantity"]: r for r in records.get(GPU_RACE) or []}
+    doc = (records.get(GPU_RACE) or [{}])[0]
+    rows = {r["quantity"]: r for r in doc.get("rows") or []}
+    where = (f"{', '.join(doc.get('gpu') or ['?'])}, {len(doc.get('runs') or [])} fresh processes, code "
+             f"{', '.join(sorted(set(doc.get('commits') or ['?'])))}")
     out = []
     for other, role in (("a GPU BVH (Warp)", "warp_bvh"), ("the neural SDF, sphere traced on the GPU",
                                                             "neural SDF device tracer"),
@@ -476,21 +479,47 @@ def renders_faster_on_gpu(records: Records) -> list[Claim]:
             out.append(Claim(name, src, paper, "–", f"`reports/{GPU_RACE_FILE}`", NO_RECORDS,
                              "needs a GPU: tools/device/run_repeats.sh, then python -m ddfbench.bench.repeats"))
             continue
-        logs = [summarize_values(math.log(v) for v in r["values"].values()) for r in found]  # geometric, as above
+        logs = [_log_summary(r["values"].values()) for r in found]  # geometric, as the ratios above
         sides = ["above" if g.lo > 0 else "below" if g.hi < 0 else "straddles" for g in logs]
         verdict = CONFIRMED if sides == ["above"] * 2 else REFUTED if sides == ["below"] * 2 else NOT_SEPARABLE
-        mae = [rows.get(f"{s}: depth MAE {k}") for s in ("primary",) for k in ("DDF", role)]
+        ddf_mae, other_mae = rows.get("primary: depth MAE DDF"), rows.get(f"primary: depth MAE {role}")
+        if role == "warp_bvh":
+            accuracy = (f"primary-ray depth MAE DDF {ddf_mae['median']:.2g} (median), the BVH exact; "
+                        + _lod_note(rows) if ddf_mae else "see the report's depth MAE rows.")
+        else:
+            accuracy = (f"primary-ray depth MAE DDF {ddf_mae['median']:.2g}, {role} {other_mae['median']:.2g} "
+                        "(medians)." if ddf_mae and other_mae else "see the report's depth MAE rows.")
         out.append(Claim(
             name, src, paper, "; ".join(f"{s} rays {sig3(math.exp(g.mean))}× [{sig3(math.exp(g.lo))}, "
                                         f"{sig3(math.exp(g.hi))}] (n={g.n} runs)"
                                         for s, g in zip(("primary", "incoherent"), logs)),
-            f"`reports/{GPU_RACE_FILE[:-5]}.md` rows '… DDF / {role}' (NVIDIA H200, 5 fresh processes)", verdict,
-            "Rays/s ratios of the DDF's fastest variant (the one-kernel bf16 depth) over the other, each formed in "
-            "one process on the same 1,048,576 rays; geometric mean over runs (ray seeds), 95 % t-interval. Depth "
-            "only, and not at equal accuracy: " + (f"primary-ray depth MAE DDF {mae[0]['median']:.2g}, {role} "
-                                                   f"{mae[1]['median']:.2g} (medians)." if all(mae)
-                                                   else "see the report's depth MAE rows.")))
+            f"`reports/{GPU_RACE_FILE[:-5]}.md` rows '… DDF / {role}' ({where})", verdict,
+            "Rays/s ratios of the DDF's fastest variant over the other, each formed in one process on the same rays; "
+            "geometric mean over the runs (ray seeds: five views, five incoherent sets; one trained network), 95 % "
+            "t-interval of the logs. Depth only, and not at equal accuracy: " + accuracy))
     return out
+
+
+def _log_summary(values) -> Summary:
+    """Summary of the logs of the positive finite values (a ratio's geometric mean and interval, exponentiated)."""
+    return summarize_values(math.log(v) for v in values if v is not None and math.isfinite(v) and v > 0)
+
+
+def _lod_note(rows: dict[str, dict]) -> str:
+    """At matched accuracy: each capacity measured twice or more against the coarsest LOD raced beside it."""
+    parts = []
+    for q, r in rows.items():
+        if q.startswith("capacity ") and ": DDF / mesh_lod_" in q and r["n"] >= 2:
+            cap, lod = q.split(":")[0], q.split("/ ")[1]
+            coarsest = min((k.split("/ ")[1] for k in rows if k.startswith(f"{cap}: DDF / mesh_lod_")),
+                           key=lambda name: int(name.rsplit("_", 1)[1]))
+            lod_mae, cap_mae = rows.get(f"{lod}: depth MAE (primary)"), rows.get(f"{cap}: depth MAE")
+            if lod == coarsest and lod_mae and cap_mae:
+                g = _log_summary(r["values"].values())
+                parts.append(f"{cap} / the {lod.rsplit('_', 1)[1]}-triangle LOD {sig3(math.exp(g.mean))}× "
+                             f"[{sig3(math.exp(g.lo))}, {sig3(math.exp(g.hi))}] (n={g.n}) at "
+                             f"{cap_mae['median'] / lod_mae['median']:.2g}× the LOD's depth error")
+    return ("at matched accuracy no LOD is as coarse as the DDF: " + "; ".join(parts) + ".") if parts else ""
 
 
 def render_costs(records: Records) -> list[Claim]:
@@ -704,7 +733,7 @@ def load_committed(reports: str) -> Records:
     gpu_race = os.path.join(reports, GPU_RACE_FILE)
     if os.path.isfile(gpu_race):
         with open(gpu_race) as fh:
-            records[GPU_RACE] = json.load(fh)["rows"]
+            records[GPU_RACE] = [json.load(fh)]
     return records
 
 
