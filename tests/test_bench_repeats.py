@@ -132,3 +132,20 @@ def test_runs_of_different_networks_are_not_pooled(tmp_path, capsys):
     a["ddf"], b["ddf"] = {"prepared": "ddf_tuned-128x4-aaaa"}, {"prepared": "ddf_tuned-128x4-bbbb"}
     paths = [_write(tmp_path / "a.json", a), _write(tmp_path / "b.json", b)]
     assert repeats.main(paths) == 2 and "raced different ddf networks" in capsys.readouterr().err
+
+
+def test_the_committed_gpu_repeats_regenerate_from_their_runs(tmp_path):
+    """reports/bench/cuda/h200/repeats.{md,json} are what `python -m ddfbench.bench.repeats` makes of the committed
+    seed*.json beside them, byte for byte (a hand-edited figure fails here)."""
+    import os
+
+    folder = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "reports", "bench", "cuda", "h200")
+    runs = json.load(open(os.path.join(folder, "repeats.json")))["runs"]
+    cwd = os.getcwd()
+    try:
+        os.chdir(folder)  # the committed table names the runs as given on the command line
+        assert repeats.main([*runs, "--out", str(tmp_path)]) == 0
+    finally:
+        os.chdir(cwd)
+    for name in ("repeats.md", "repeats.json"):
+        assert (tmp_path / name).read_bytes() == open(os.path.join(folder, name), "rb").read(), name

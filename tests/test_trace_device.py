@@ -16,6 +16,7 @@ from ddfbench.core.errors import InputError
 from ddfbench.core.representation import Budget, FitData
 from ddfbench.evaluate.trace import TraceOptions, sphere_trace
 from ddfbench.evaluate.trace_device import DeviceSphereTracer
+from tests.test_trace import CountingField, analytic_hit
 
 R = 0.5
 DOMAIN = 0.6
@@ -31,27 +32,9 @@ def box(p: torch.Tensor, half=(0.3, 0.2, 0.4)) -> torch.Tensor:
     return q.clamp_min(0).norm(dim=1) + q.amax(dim=1).clamp_max(0)
 
 
-class Counting:
-    """A field that records the batch size of every call."""
-
-    def __init__(self, fn):
-        self.fn, self.batches = fn, []
-
-    def __call__(self, p):
-        self.batches.append(int(p.shape[0]))
-        return self.fn(p)
-
-
-def analytic(o: np.ndarray, d: np.ndarray, radius: float = R):
-    """First crossing t of the sphere |x| = radius (the exit for an origin inside; inf on a miss) and the
-    discriminant (how far from grazing), float64."""
-    o, d = o.astype(np.float64), d.astype(np.float64)
-    b = (o * d).sum(1)
-    disc = b * b - ((o * o).sum(1) - radius**2)
-    root = np.sqrt(np.maximum(disc, 0))
-    near, far = -b - root, -b + root
-    t = np.where(near >= 0, near, far)
-    return np.where((disc > 0) & (far >= 0), t, np.inf), disc
+def analytic(o: np.ndarray, d: np.ndarray):
+    """tests.test_trace.analytic_hit for this file's sphere (radius R): the first crossing t, inf on a miss."""
+    return analytic_hit(o, d, radius=R)
 
 
 def trace(field, o, d, **kw):
@@ -123,7 +106,7 @@ def test_a_ray_starting_inside_finds_the_exit():
 
 
 def test_sign_change_field_is_refined_to_the_surface():
-    field = Counting(lambda p: 3.0 * sphere(p))  # not 1-Lipschitz: steps overshoot, hits come from brackets
+    field = CountingField(lambda p: 3.0 * sphere(p))  # not 1-Lipschitz: steps overshoot, hits come from brackets
     o, d = view_rays(32)
     t, tracer = trace(field, o, d)
     ref, disc = analytic(o, d)
@@ -148,7 +131,7 @@ def test_rays_missing_the_box_cost_no_evaluation():
     o_out = np.tile(np.float32([[2.0, 2.0, 2.0]]), (n_out, 1))
     d_out = np.tile(np.float32([[1.0, 0.0, 0.0]]), (n_out, 1))  # pointing away: never meets the box
     o_hit, d_hit = view_rays(8)
-    field = Counting(sphere)
+    field = CountingField(sphere)
     t, tracer = trace(field, o_out, d_out)
     assert field.batches == [] and tracer.field_evals == 0 and np.isinf(t).all()
     o, d = np.concatenate([o_out, o_hit]), np.concatenate([d_out, d_hit])
@@ -158,7 +141,7 @@ def test_rays_missing_the_box_cost_no_evaluation():
 
 
 def test_a_field_that_never_converges_leaves_rays_undecided():
-    field = Counting(lambda p: torch.full((p.shape[0],), 1e-3))  # 1e-3 a step: 40 steps never leave the box
+    field = CountingField(lambda p: torch.full((p.shape[0],), 1e-3))  # 1e-3 a step: 40 steps never leave the box
     o, d = view_rays(8)
     opts = TraceOptions(max_steps=40)
     t, tracer = trace(field, o, d, options=opts, sync_every=8)
