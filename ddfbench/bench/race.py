@@ -36,7 +36,8 @@ fit_seconds, fit_steps (0: by fit_seconds), prepared (folder or null), grid_reso
 samples), chunk (DDF rays per network call), compile (bool: the DDF's torch.compile variants), sdf_compile (bool:
 the neural SDF's device tracer compiled too, CUDA), sdf_eager (bool: its eager device tracers), sdf_loops (bool:
 the numpy-in-and-out tracing loops), embree (bool: Embree on every core, and the reference; false: the oracle's
-answers are the reference), capacities (bool), lods (triangle counts),
+answers are the reference), capacities (bool), capacity_levels (null: all; or a list, e.g. [c3, c4]), lods
+(triangle counts),
 model / neural (overrides of the main DDF / neural SDF).
 """
 
@@ -413,7 +414,10 @@ def capacities(ctx: Context, samples, primary, reference: Callable, meshes: dict
     n = len(o_np)
     t_ref, out = reference(o_np, d_np), result.details.setdefault("capacities", {})  # filled as it goes
     casts = {name: (lambda o, d, on, dn, c=c: c.cast_torch(o, d)[0]) for name, c in meshes.items()}
+    chosen = ctx.sizes.get("capacity_levels")  # None: all four
     for level, overrides in pareto_ddf_capacities().items():
+        if chosen is not None and level not in chosen:
+            continue
         rep, info = train_ddf(ctx, samples, overrides)
         variants = {name: (lambda o, d, on, dn, f=f: f(o, d)) for name, f in ddf_variants(ctx, rep, False).items()}
         timed = race(ctx, o_np, d_np, {**variants, **casts})

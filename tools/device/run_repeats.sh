@@ -8,6 +8,7 @@
 # on the GPU (Warp's BVH against the one-kernel DDF, 1M rays a set). The runs come back as $OUT/res.tgz (packed
 # again after each step, so a stop keeps what ran): `tar -xzf res.tgz` here. SEEDS (default "1 2 3 4 5"),
 # LATER_SETS (more --set options for seeds 2-5, e.g. "--set race.embree=false --set race.sdf_loops=false"),
+# ALL_SETS (for every seed, e.g. "--set race.capacity_levels=[c3,c4]"),
 # CROSSOVER=0 (no crossover) and the limits RACE1_S, RACE_S, CROSS_S, LAST_RACE_AT shape a shorter call.
 # usage: FIT_STEPS=N bash .devB/run_repeats.sh COMMIT   (in the repo root; writes into $OUT). A check on the CPU:
 #   NO_SETUP=1 DEVICE=cpu SIZES=small FIT_STEPS=50 PREPARED_DIR=/tmp/p OUT=/tmp/o bash .devB/run_repeats.sh x
@@ -23,7 +24,7 @@ for k in ${SEEDS:-1 2 3 4 5}; do
   [ $(( $(date +%s) - T0 )) -lt ${LAST_RACE_AT:-440} ] || break  # leave the crossover its time in the call
   extra="" limit=${RACE1_S:-150}
   [ $k = 1 ] || extra="--set race.compile=false ${LATER_SETS:-}" limit=${RACE_S:-70}
-  timeout -k 10 -s TERM $limit python3 -m ddfbench.bench $common --only race --set race.ray_seed=$k --set race.sweep=[] $extra \
+  timeout -k 10 -s TERM $limit python3 -m ddfbench.bench $common --only race --set race.ray_seed=$k --set race.sweep=[] $extra ${ALL_SETS:-} \
     --set race.prepared=$prep --set race.fit_steps=${FIT_STEPS:?} --out /tmp/res/seed$k > /tmp/res/seed$k.log 2>&1
   pack "race seed $k" $?; grep "^\[bench\] race:" /tmp/res/seed$k.log
 done
