@@ -85,7 +85,7 @@ def depth_error(t: np.ndarray, reference: np.ndarray) -> dict[str, float]:
 
 def ddf_depth(rep: DDF, device: str, fused: bool | None = None) -> tuple[DDFDepth, str]:
     """rep's device path and its name: with fused (default: on CUDA with Triton) the one-kernel depth
-    (fused="depth"), checked once against the bf16 forward (race._check_against), else the bf16 forward with
+    (fused="depth"), checked once against the bf16 forward (contestants.check_against), else the bf16 forward with
     why; on CUDA without Triton bf16, on the CPU fp32."""
     cuda = device.startswith("cuda")
     if fused is None:
@@ -96,10 +96,10 @@ def ddf_depth(rep: DDF, device: str, fused: bool | None = None) -> tuple[DDFDept
         return DDFDepth(rep, "bf16", chunk=CHUNK), "DDFDepth bf16 (fused depth not run: Triton is not installed)"
     bf16 = DDFDepth(rep, "bf16", chunk=CHUNK)
     try:
-        from ddfbench.bench.race import _check_against
+        from ddfbench.bench.contestants import check_against
 
         one_kernel = DDFDepth(rep, "bf16", fused="depth", chunk=CHUNK)
-        _check_against(one_kernel, bf16, device)
+        check_against(one_kernel, bf16, device)
     except Exception as err:  # the bench goes on with the bf16 forward; the details say why
         return bf16, f"DDFDepth bf16 (fused depth not run: {one_line(err)})"
     return one_kernel, "DDFDepth bf16 fused depth (one kernel)"

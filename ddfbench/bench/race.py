@@ -2,7 +2,7 @@
 in the same process, each speed with its accuracy against the oracle beside it (the DDF paper's speed
 claim, measured where it is about: `--device cuda`).
 
-Contestants, all answering first-hit depth (no normals) for the same rays:
+Contestants (built in ddfbench.bench.contestants), all answering first-hit depth (no normals) for the same rays:
 - DDF (conf/model/ddf_tuned.yaml, the preset the experiments compare, trained `fit_seconds`): ddfbench.models.ddf.infer.DDFDepth on the device in fp32,
   bf16 autocast and bf16 compiled (torch.compile; only with `compile: true`), and on CUDA with Triton the MLP
   as one kernel between compiled passes (ddf_bf16_fused) and the whole answer as one kernel
@@ -37,13 +37,11 @@ samples), chunk (DDF rays per network call), compile (bool: the DDF's torch.comp
 the neural SDF's device tracer compiled too, CUDA), sdf_eager (bool: its eager device tracers), sdf_loops (bool:
 the numpy-in-and-out tracing loops), embree (bool: Embree on every core, and the reference; false: the oracle's
 answers are the reference), capacities (bool), capacity_levels (null: all; or a list, e.g. [c3, c4]), lods
-(triangle counts),
-model / neural (overrides of the main DDF / neural SDF).
+(triangle counts), model / neural (overrides of the main DDF / neural SDF).
 """
 
 from __future__ import annotations
 
-import dataclasses
 import functools
 import importlib.util
 import os
@@ -52,31 +50,29 @@ from typing import Callable
 import numpy as np
 import torch
 
-from ddfbench.bench import prepared
-from ddfbench.bench.context import Context, model_preset, preset
-from ddfbench.bench.ddf import bare_forward
+from ddfbench.bench.contestants import (
+    answer_diff,
+    ddf_variants,
+    device_tracers,
+    embree_all_cores,
+    entry_forward,
+    lod_casters,
+    mlp_flops,
+    pareto_ddf_capacities,
+    sdf_contestants,
+    sdf_depth,
+    train_ddf,
+)
+from ddfbench.bench.context import Context, preset
 from ddfbench.bench.results import SectionResult, Target, compare
 from ddfbench.bench.timing import Timing, measure_side_by_side
-from ddfbench.bench.tracing import grid_sdf, neural_sdf
 from ddfbench.bench.views import incoherent_rays, orbit_eye, view_rays
-from ddfbench.core import plugins
-from ddfbench.core.clock import clock, timed
-from ddfbench.core.errors import InputError, one_line
-from ddfbench.core.geometry import box_entry
-from ddfbench.evaluate.trace_device import DeviceSphereTracer
-from ddfbench.models.ddf import DDF
+from ddfbench.core.clock import timed
 from ddfbench.models.ddf.infer import DDFDepth
-from ddfbench.models.grid_sdf import GridSDF
-from ddfbench.models.mesh import decimate
-from ddfbench.models.neural_sdf import NeuralSDF
 from ddfbench.sampling import surface
-from ddfbench.truth.embree_pool import EmbreePool
 
 SPEED_GOAL = Target(">=", 1e9, on="value")  # the fastest DDF variant's rays/s at 1M+ rays on an H100/H200 (issue 17)
 BARE_SHARE = Target(">=", 0.8)  # the fastest DDF variant against the bare forward of the same network, same precision
-DDF_PRESET = "ddf_tuned"  # the DDF of representations, render_time and pareto
-SDF_PRESET = "neural_sdf_tuned"  # the neural SDF beside it there
-TF32_EPS_ABS = 1e-4  # the device tracer's absolute hit tolerance in tf32 (see device_tracers)
 
 
 def accuracy(t: np.ndarray, t_ref: np.ndarray) -> dict[str, float]:
@@ -85,140 +81,6 @@ def accuracy(t: np.ndarray, t_ref: np.ndarray) -> dict[str, float]:
     both, union = hit & ref, (hit | ref).sum()
     mae = float(np.abs(t[both] - t_ref[both]).mean()) if both.any() else float("nan")
     return {"depth_mae": mae, "mask_iou": float(both.sum() / union) if union else 1.0}
-
-
-def pareto_ddf_capacities() -> dict[str, dict]:
-    """The DDF's pareto levels (its YAML's experiments.pareto): {"c1": model overrides, ...}."""
-    levels = plugins.levels("model", DDF_PRESET, "pareto")
-    return {level: dict(part.get("model") or {}) for level, part in levels.items()}
-
-
-def train_ddf(ctx: Context, samples: Callable, overrides: dict) -> tuple[DDF, dict]:
-    """conf/model/<DDF_PRESET>.yaml with overrides, fit on samples() by the sizes' budget (Context.timed_fit), or
-    loaded from the sizes' `prepared` folder; on ctx.device."""
-    fresh = DDF(model_preset(DDF_PRESET, **overrides))  # its cfg holds the family's defaults too
-
-    def make() -> tuple[DDF, dict]:
-        return fresh, {**ctx.timed_fit(fresh, samples()), "n_params": fresh.n_params(),
-                       **{k: fresh.cfg[k] for k in ("width", "depth")}}
-
-    rep, info = prepared.artifact(ctx.sizes, f"{DDF_PRESET}-{fresh.cfg['width']}x{fresh.cfg['depth']}",
-                                  {"cfg": fresh.cfg, "labels": "surface sampling, exact", **ctx.fit_spec()}, DDF, make)
-    return rep.to(ctx.device), info
-
-
-def sdf_contestants(ctx: Context) -> tuple[NeuralSDF, dict, GridSDF, dict]:
-    """The neural SDF (SDF_PRESET, the sizes' `neural` overrides, fit like the DDF) and the level-set grid SDF, made
-    or loaded from `prepared` (bench.prepared), on ctx.device: (neural, its info, grid, its info)."""
-    s = ctx.sizes
-    cfg = model_preset(SDF_PRESET, **dict(s.get("neural") or {}))
-    nsdf, n_info = prepared.artifact(s, SDF_PRESET, {"cfg": cfg, "n_samples": s["n_samples"], **ctx.fit_spec()},
-                                     NeuralSDF, lambda: neural_sdf(ctx, SDF_PRESET))
-    gsdf, g_info = prepared.artifact(s, "grid_sdf", {"cfg": model_preset("grid_sdf"), "shape": s["shape"],
-                                                     "resolution": s["grid_resolution"], "build": "levelset"},
-                                     GridSDF, lambda: grid_sdf(ctx))
-    return nsdf.to(ctx.device), n_info, gsdf.to(ctx.device), g_info
-
-
-def device_tracers(ctx: Context, nsdf: NeuralSDF, gsdf: GridSDF, details: dict) -> dict[str, DeviceSphereTracer]:
-    """Both SDFs through the device-resident tracer with their presets' trace options: the neural SDF in fp32 and
-    bf16 (on CUDA also tf32, and with `sdf_compile` its step compiled in tf32), the grid in fp32 (trilinear reads).
-    Each traces 4096 incoherent rays first: one that fails is left out with why in details[name], and the seconds
-    of that first call (a compile) go to details["cold"][f"{name}_first_4096_rays_s"]."""
-    cuda = ctx.device.startswith("cuda")
-    # tf32 rounds the field by about 1e-4, above the preset's 1e-6 hit tolerance: it gets TF32_EPS_ABS (named in
-    # details), as bf16 gets the tracer's eps_abs_bf16
-    tf32_opts = dataclasses.replace(nsdf.trace_options, eps_abs=max(TF32_EPS_ABS, nsdf.trace_options.eps_abs))
-    eager = (["fp32", "tf32", "bf16"] if cuda else ["fp32", "bf16"]) if ctx.sizes.get("sdf_eager", True) else []
-    made = {f"neural_sdf_device_{p}": DeviceSphereTracer(nsdf.field, nsdf.domain,
-                                                         tf32_opts if p == "tf32" else nsdf.trace_options, precision=p)
-            for p in eager}
-    if cuda and ctx.sizes.get("sdf_compile"):
-        made["neural_sdf_device_tf32_compiled"] = DeviceSphereTracer(nsdf.field, nsdf.domain, tf32_opts,
-                                                                     precision="tf32", compiled=True)
-    details["device_tracer_eps_abs"] = {name: t.eps_abs for name, t in made.items()}
-    made["grid_sdf_device_fp32"] = DeviceSphereTracer(gsdf.field, gsdf.domain, gsdf.trace_options)
-    o, d = (torch.as_tensor(a, device=ctx.device) for a in incoherent_rays(4096, seed=5))
-    out, first = {}, {}
-    for name, tracer in made.items():
-        try:
-            t, details.setdefault("cold", {})[f"{name}_first_4096_rays_s"] = timed(lambda: tracer(o, d))
-            first[name] = t.cpu().numpy()
-            reference = first.get("neural_sdf_device_fp32") if name.startswith("neural") else None  # (when raced)
-            if reference is not None and name != "neural_sdf_device_fp32":  # tf32, bf16, compiled: as fp32 answers
-                diff = _diff(first[name], reference)
-                if diff["mask_disagreement"] > 0.02:
-                    raise ValueError(f"hit masks disagree with the fp32 tracer's on {diff['mask_disagreement']:.3f}")
-                details[f"{name}_vs_fp32_on_4096_rays"] = diff
-            out[name] = tracer
-        except Exception as err:  # the race goes on without it; the JSON says why
-            details[name] = f"not run: {one_line(err)}"
-    return out
-
-
-def lod_casters(ctx: Context, mesh, caster: Callable, details: dict) -> dict[str, Callable]:
-    """{"mesh_lod_<faces>": Warp caster of the shape decimated to `lods` triangles}, the LODs from `prepared` when
-    there (a machine without pymeshlab cannot decimate: then {} and why in details["lods"])."""
-    out = {}
-    for faces in (int(f) for f in ctx.sizes.get("lods") or []):
-        try:
-            lod = prepared.mesh(ctx.sizes, f"{ctx.sizes['shape']}-lod", {"shape": ctx.sizes["shape"], "faces": faces},
-                                lambda: decimate(mesh, faces))
-        except InputError as err:
-            details["lods"] = f"not run: {err}"
-            return {}
-        out[f"mesh_lod_{len(lod.faces)}"] = caster(lod.vertices, lod.faces, ctx.device)
-    return out
-
-
-def mlp_flops(rep: DDF) -> int:
-    """Multiply-adds x 2 of one ray through the network's Linear layers (unpadded: what the network needs)."""
-    return 2 * sum(m.in_features * m.out_features for m in rep.net.modules() if isinstance(m, torch.nn.Linear))
-
-
-def entry_forward(rep: DDF, o: torch.Tensor, d: torch.Tensor, chunk: int, precision: str) -> Callable[[], None]:
-    """The network alone (bench.ddf.bare_forward) on the box-entry points of rays o, d (N, 3) (computed once,
-    outside the timing), in fp32 or under bf16 autocast."""
-    x = o + box_entry(o, d, rep.domain)[0][:, None] * d
-    dtype = torch.bfloat16 if precision == "bf16" else None
-    return lambda: bare_forward(rep.net, x, d, chunk, dtype=dtype)
-
-
-def ddf_variants(ctx: Context, rep: DDF, compile_too: bool, details: dict | None = None) -> dict[str, DDFDepth]:
-    """fp32, bf16, with compile_too and sizes `compile` bf16 compiled and, on CUDA with Triton, the fused kernels
-    of ddfbench.models.ddf.fused: with compile_too the MLP kernel between compiled passes (ddf_bf16_fused) and always
-    the one-kernel depth (ddf_bf16_fused_depth). A variant that cannot be built or answers 4096 rays unlike bf16
-    is left out, with why in details[name]; the seconds of a fused variant's build and check (its kernels'
-    compile and a first autotune) go to details["cold"][f"{name}_build_and_check_s"]."""
-    chunk = int(ctx.sizes["chunk"])
-    out = {"ddf_fp32": DDFDepth(rep, "fp32", chunk=chunk), "ddf_bf16": DDFDepth(rep, "bf16", chunk=chunk)}
-    compiling = compile_too and ctx.sizes.get("compile")
-    if compiling:
-        out["ddf_bf16_compiled"] = DDFDepth(rep, "bf16", compiled=True, chunk=chunk)
-    if ctx.device.startswith("cuda") and importlib.util.find_spec("triton") is not None:
-        for name, fused in [("ddf_bf16_fused", "mlp")] * bool(compiling) + [("ddf_bf16_fused_depth", "depth")]:
-            try:
-                start = clock()
-                variant = DDFDepth(rep, "bf16", compiled=fused == "mlp", chunk=chunk, fused=fused)
-                _check_against(variant, out["ddf_bf16"], ctx.device)
-                out[name] = variant
-                if details is not None:
-                    details.setdefault("cold", {})[f"{name}_build_and_check_s"] = clock() - start
-            except Exception as err:  # the race goes on without it; the JSON says why
-                if details is not None:
-                    details[name] = f"not run: {one_line(err)}"
-    return out
-
-
-def _check_against(depth: DDFDepth, reference: DDFDepth, device: str, n: int = 4096) -> None:
-    """Raise unless depth answers n incoherent rays like reference (hit masks agree on 98 %, depth MAE < 1e-2);
-    the copy to the host synchronizes, so a kernel's fault is raised here. (A CUDA fault sticks to the
-    process: the race then fails as a whole, with that error.)"""
-    o, d = (torch.as_tensor(a, device=device) for a in incoherent_rays(n, seed=5))
-    diff = _diff(depth(o, d).cpu().numpy(), reference(o, d).cpu().numpy())
-    if diff["mask_disagreement"] > 0.02 or not diff["depth_mae"] < 1e-2:
-        raise ValueError(f"answers differ from the bf16 forward's: hit masks disagree on {diff['mask_disagreement']:.3f}, "
-                         f"depth MAE {diff['depth_mae']:.2e}")
 
 
 def fastest(timed: dict[str, tuple], names) -> str:
@@ -297,8 +159,8 @@ def _race_all(ctx: Context, result: SectionResult, samples, ddf, nsdf, gsdf, war
     contestants: dict[str, Callable] = {name: (lambda o, d, on, dn, f=f: f(o, d)) for name, f in {**variants, **tracers}.items()}
     contestants.update({"warp_bvh": lambda o, d, on, dn: warp.cast_torch(o, d)[0], **embree})
     if s.get("sdf_loops", True):  # the numpy-in-and-out loop the device tracers are measured against
-        contestants.update({"neural_sdf_trace": lambda o, d, on, dn: _sdf_t(nsdf, on, dn),
-                            "grid_sdf_trace": lambda o, d, on, dn: _sdf_t(gsdf, on, dn)})
+        contestants.update({"neural_sdf_trace": lambda o, d, on, dn: sdf_depth(nsdf, on, dn),
+                            "grid_sdf_trace": lambda o, d, on, dn: sdf_depth(gsdf, on, dn)})
     ray_sets = {"primary": view_rays(int(s["px"]), eye=orbit_eye(seed)),
                 "incoherent": incoherent_rays(int(s["incoherent_rays"]), seed=seed)}
     for set_name, (o_np, d_np) in ray_sets.items():
@@ -338,7 +200,7 @@ def _race_all(ctx: Context, result: SectionResult, samples, ddf, nsdf, gsdf, war
                                      n, ctx, target=BARE_SHARE if ctx.device.startswith("cuda") else None))
         for name in variants:
             if name != "ddf_fp32":
-                details[f"{name}_vs_fp32_depth_diff"] = _diff(timed[name][0], timed["ddf_fp32"][0])
+                details[f"{name}_vs_fp32_depth_diff"] = answer_diff(timed[name][0], timed["ddf_fp32"][0])
         if ctx.device.startswith("cuda") and n >= 1_000_000:
             result.rows.append(compare("race", f"{set_name}: DDF ({best}) rays/s", timed[best][1].rate(n), "rays/s",
                                        "goal 1e9 rays/s (H100/H200, 1M+ rays)", 1e9, device=ctx.device,
@@ -350,37 +212,6 @@ def _race_all(ctx: Context, result: SectionResult, samples, ddf, nsdf, gsdf, war
     sweep(ctx, variants, best, warp, embree, result)
     if s.get("capacities", True):
         capacities(ctx, samples, ray_sets["primary"], reference, {"warp_bvh": warp, **lods}, result)
-
-
-def embree_all_cores(ctx: Context, oracle, mesh, result: SectionResult) -> tuple[dict[str, Callable], EmbreePool | None]:
-    """({"embree_all_cores": contestant}, the pool to close or None): open3d's Embree through the oracle, or
-    where the oracle is Warp's (a machine without open3d) embreex in one process per core; ({}, None) with
-    the reason in result.details where neither is installed."""
-    if not ctx.sizes.get("embree", True):
-        result.details["embree_all_cores"] = "not run: embree=false (the depth reference is the oracle's)"
-        return {}, None
-    if ctx.oracle_backend == "open3d":
-        result.details["embree_all_cores"] = "open3d RaycastingScene (Embree on every core)"
-        return {"embree_all_cores": lambda o, d, on, dn: oracle.hit_distance(on, dn)}, None
-    if importlib.util.find_spec("embreex") is None:
-        result.details["embree_all_cores"] = "not run: neither open3d (the oracle is Warp's) nor embreex is installed"
-        return {}, None
-    pool = EmbreePool(mesh)
-    result.details["embree_all_cores"] = f"embreex in {pool.workers} processes (ddfbench.truth.embree_pool; no open3d)"
-    return {"embree_all_cores": lambda o, d, on, dn: pool.hit_distance(on, dn)}, pool
-
-
-def _sdf_t(rep, o: np.ndarray, d: np.ndarray) -> np.ndarray:
-    return rep.intersect(o, d, normals=False).t
-
-
-def _diff(t: np.ndarray, t_fp32: np.ndarray) -> dict[str, float]:
-    """A DDF variant's depth t (N,) against another's (its fp32 answer; in _check_against the bf16 one): MAE where
-    both hit, and the share of rays whose hit masks disagree."""
-    a, b = np.isfinite(t), np.isfinite(t_fp32)
-    both = a & b
-    return {"depth_mae": float(np.abs(t[both] - t_fp32[both]).mean()) if both.any() else 0.0,
-            "mask_disagreement": float((a != b).mean())}
 
 
 def sweep(ctx: Context, variants: dict[str, DDFDepth], best_name: str, warp, embree: dict,
