@@ -94,14 +94,14 @@ def test_a_short_race_leaves_out_embree_the_loops_and_the_eager_tracers(tmp_path
     """embree=false, sdf_loops=false, sdf_eager=false (the repeats' later processes): no Embree pool is started
     or timed, the reference is the oracle's, and only the device tracers that remain race (on the CPU: the grid's);
     capacity_levels races the chosen capacities alone."""
-    sets = ["race.embree=false", "race.sdf_loops=false", "race.sdf_eager=false", "race.capacity_levels=[c3]"]
+    sets = ["race.embree=false", "race.sdf_loops=false", "race.sdf_eager=false", "race.capacity_levels=[c1]", "race.lods=[]"]
     code = main(["--sizes", "small", "--only", "race", "--repeats", "1", "--warmup", "0", "--threads", "1",
                  "--out", str(tmp_path), *[a for s in sets for a in ("--set", s)]])
     doc = json.loads(next(tmp_path.glob("bench-cpu-small*.json")).read_text())
     det = doc["sections"]["race"]["details"]
     assert code == 0 and det["embree_all_cores"].startswith("not run: embree=false")
     assert det["reference"] == "open3d oracle" and "embree_pool_start_s" not in det["cold"]
-    assert list(det["capacities"]) == ["c3"]  # the chosen level alone
+    assert list(det["capacities"]) == ["c1"]  # the chosen level alone
     for set_name in ("primary", "incoherent"):
         raced = {k for k, v in det[set_name].items() if isinstance(v, dict) and "rays_per_s" in v}
         assert not raced & {"embree_all_cores", "neural_sdf_trace", "grid_sdf_trace", "neural_sdf_device_fp32"}
