@@ -393,33 +393,36 @@ def test_the_gpu_race_claims_read_the_committed_repeats_file(tmp_path):
     """reports/bench/cuda/h200/repeats.json (bench.repeats) gives the GPU rows: geometric mean over runs with the
     t interval of the logs, confirmed only when both ray sets lie above 1; no file: no records."""
     import json
-    import math
     import os
 
     from ddfbench.report import claims as cl
 
-    def row(q, values):
-        return {"quantity": q, "n": len(values), "values": {str(i): v for i, v in enumerate(values, 1)}, "median": 0}
+    def row(q, values, geometric=None):  # a pooled row as bench.repeats writes it; a ratio with (gmean, glo, ghi)
+        g = dict(zip(("gmean", "glo", "ghi"), geometric)) if geometric else {}
+        return {"quantity": q, "n": len(values), "values": {str(i): v for i, v in enumerate(values, 1)}, "median": 0,
+                **g}
 
-    rows = [row("primary: DDF / warp_bvh", [2.0, 4.0, 3.0]), row("incoherent: DDF / warp_bvh", [3.0, 3.5, 4.0]),
-            row("primary: DDF / neural SDF device tracer", [0.5, 2.0, 1.0]),
-            row("incoherent: DDF / neural SDF device tracer", [300.0, 320.0, 310.0])]
+    rows = [row("primary: DDF / warp_bvh", [2.0, 4.0, 3.0], (2.88, 1.51, 5.49)),
+            row("incoherent: DDF / warp_bvh", [3.0, 3.5, 4.0], (3.48, 2.42, 5.0)),
+            row("primary: DDF / neural SDF device tracer", [0.5, 2.0, 1.0], (1.0, 0.18, 5.6)),
+            row("incoherent: DDF / neural SDF device tracer", [300.0, 320.0, 310.0], (310, 289, 333))]
     path = tmp_path / cl.GPU_RACE_FILE
     os.makedirs(path.parent)
-    rows += [row("capacity c2 (128x4): DDF / mesh_lod_1000", [1.0, 1.2, 0.9]),
-             row("capacity c2 (128x4): DDF / mesh_lod_4000", [1.5, 1.4, 1.6]),
+    rows += [row("capacity c2 (128x4): DDF / mesh_lod_1000", [1.0, 1.2, 0.9], (1.03, 0.72, 1.47)),
+             row("capacity c2 (128x4): DDF / mesh_lod_4000", [1.5, 1.4, 1.6], (1.5, 1.27, 1.76)),
+             row("capacity c2 (128x4): DDF / mesh_lod_16000", [2.5], (2.5, 2.5, 2.5)),  # one run: not quoted
              {**row("capacity c2 (128x4): depth MAE", [0.02] * 3), "median": 0.02},
              {**row("mesh_lod_1000: depth MAE (primary)", [0.004] * 3), "median": 0.004},
              {**row("primary: depth MAE DDF", [0.02] * 3), "median": 0.02}]
     path.write_text(json.dumps({"rows": rows, "gpu": ["GPU X"], "runs": ["a", "b", "c"], "commits": ["abc1234"] * 3}))
     out = {c.claim: c for c in cl.renders_faster_on_gpu(cl.load_committed(str(tmp_path)))}
     bvh = out["DDF renders faster than a GPU BVH (Warp)"]
-    assert bvh.verdict == cl.CONFIRMED and f"primary rays {24 ** (1 / 3):.3g}×" in bvh.measured  # (2*4*3)^(1/3)
+    assert bvh.verdict == cl.CONFIRMED  # both intervals above 1
+    assert "primary rays 2.88× [1.51, 5.49] (n=3 runs); incoherent rays 3.48× [2.42, 5] (n=3 runs)" in bvh.measured
     assert "GPU X, 3 fresh processes, code abc1234" in bvh.rows
-    # the coarsest LOD beside capacity c2, at 0.02 / 0.004 = 5x the LOD's depth error; the 4k LOD is not quoted
-    assert f"the 1000-triangle LOD {1.08 ** (1 / 3):.3g}×" in bvh.convention and "5× the LOD's" in bvh.convention
-    assert "4000-triangle" not in bvh.convention
+    # the coarsest LOD beside capacity c2 measured twice or more, at 0.02 / 0.004 = 5x the LOD's depth error
+    assert "c2 (128x4) / the 1000-triangle LOD 1.03× [0.72, 1.47] (n=3) at 5× the LOD's" in bvh.convention
+    assert "4000-triangle" not in bvh.convention and "16000-triangle" not in bvh.convention
     assert out["DDF renders faster than the neural SDF, sphere traced on the GPU"].verdict == cl.NOT_SEPARABLE
     assert out["DDF renders faster than the grid SDF, sphere traced on the GPU"].verdict == cl.NO_RECORDS
-    assert math.isclose(float(bvh.measured.split("incoherent rays ")[1].split("×")[0]), (3 * 3.5 * 4) ** (1 / 3), rel_tol=1e-2)
     assert all(c.verdict == cl.NO_RECORDS for c in cl.renders_faster_on_gpu(cl.load_committed(str(tmp_path / "none"))))

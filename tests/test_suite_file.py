@@ -8,7 +8,7 @@ import pytest
 
 from ddfbench.core import plugins
 from ddfbench.core.errors import InputError
-from ddfbench.report import suite
+from ddfbench.report import compact, suite
 
 ROOT = suite.ROOT
 
@@ -99,6 +99,21 @@ def test_run_adds_the_overrides_after_the_double_dash_to_every_experiment_and_wr
                          "hydra/launcher=ray"] for i, c in enumerate(fits))  # no "--" leaks into a command
     reports = [c for c in commands if c[2] == "ddfbench.report"]
     assert [c[3] for c in reports][:2] == [os.path.join("out", "default"), os.path.join("out", "representations")]
+
+
+def test_run_from_reports_restores_each_report_s_committed_records_before_its_sweep(monkeypatch, tmp_path, capsys):
+    commands = []
+
+    class Done:
+        returncode = 0
+
+    monkeypatch.setattr(suite, "load_suite", lambda name: {"core": [suite.Entry("default", "reports/default")]})
+    monkeypatch.setattr(suite.subprocess, "run", lambda cmd, **_: commands.append(cmd) or Done())
+    assert suite.main(["run", "v1", "--tier", "core", "--results", str(tmp_path), "--from-reports"]) == 0
+    committed = compact.read_compact(os.path.join(suite.ROOT, "reports", "default", compact.FILE))
+    assert sorted(os.listdir(tmp_path / "default")) == sorted(r["key"] for r in committed)
+    assert f"default: restored {len(committed)} committed records" in capsys.readouterr().out
+    assert len(commands) == 2  # the sweep (which now skips them), then the report
 
 
 def test_the_version_is_the_suite_s_and_the_changelog_opens_with_it():

@@ -60,12 +60,16 @@ class Context:
             self._oracles[(name, backend)] = Oracle(self.shape(name).mesh, backend=backend, device=device)
         return self._oracles[(name, backend)]
 
+    @property
+    def fit_steps(self) -> int:
+        """The sizes' fixed fit steps; 0 when a fit runs for fit_seconds of wall clock instead."""
+        return int(self.sizes.get("fit_steps") or 0)
+
     def timed_fit(self, rep: Representation, samples: Samples) -> dict[str, Any]:
         """rep fit on samples of the sizes' shape on this device, no probes: for the sizes' fit_steps when set
         (fixed work; the lr schedule runs by steps), else for fit_seconds of wall clock.
         Returns {fit_steps, fit_seconds, fit_status, fit_device}."""
-        name = self.sizes["shape"]
-        steps = int(self.sizes.get("fit_steps") or 0)
+        name, steps = self.sizes["shape"], self.fit_steps
         seconds = float("inf") if steps else float(self.sizes["fit_seconds"])
         stats = rep.fit(FitData(samples, self.shape(name).mesh, self.oracle(name)),
                         Budget(max_steps=steps or 10**9, max_seconds=seconds, device=self.device, n_probes=0))
@@ -74,5 +78,5 @@ class Context:
 
     def fit_spec(self) -> dict[str, Any]:
         """What a fit of this section is made by (bench.prepared names saved networks by it): shape and budget."""
-        steps = int(self.sizes.get("fit_steps") or 0)
+        steps = self.fit_steps
         return {"shape": self.sizes["shape"], **({"steps": steps} if steps else {"seconds": self.sizes["fit_seconds"]})}

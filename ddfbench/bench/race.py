@@ -64,7 +64,7 @@ from ddfbench.bench.contestants import (
     train_ddf,
 )
 from ddfbench.bench.context import Context, preset
-from ddfbench.bench.results import SectionResult, Target, compare
+from ddfbench.bench.results import SectionResult, Target, compare, precision_of
 from ddfbench.bench.timing import Timing, measure_side_by_side
 from ddfbench.bench.views import incoherent_rays, orbit_eye, view_rays
 from ddfbench.core.clock import timed
@@ -101,15 +101,10 @@ def race(ctx: Context, o_np: np.ndarray, d_np: np.ndarray, contestants: dict[str
     return out
 
 
-def _precision(measure: str) -> str:
-    """The precision column of a row, from the contestant its measure names ("DDF (ddf_bf16_compiled) ..." -> bf16)."""
-    return "bf16" if "bf16" in measure else "fp32"
-
-
 def _rate_row(measure: str, value_t: Timing, ref_name: str, ref_t: Timing, n: int, ctx: Context,
               target: Target | None = None, note: str = ""):
     return compare("race", measure, value_t.rate(n), "rays/s", ref_name, ref_t.rate(n), device=ctx.device,
-                   threads=ctx.threads, precision=_precision(measure), target=target, note=note)
+                   threads=ctx.threads, precision=precision_of(measure), target=target, note=note)
 
 
 def run(ctx: Context) -> SectionResult:
@@ -194,9 +189,9 @@ def _race_all(ctx: Context, result: SectionResult, samples, ddf, nsdf, gsdf, war
                 "numpy in and out) rays/s, same rays", timed[f"{kind}_trace"][1], n, ctx,
                 note=f"depth MAE {details[name]['depth_mae']:.2e} IoU {details[name]['mask_iou']:.3f}; loop: "
                      f"{details[f'{kind}_trace']['depth_mae']:.2e} / {details[f'{kind}_trace']['mask_iou']:.3f}"))
-        bare = f"ddf_bare_{_precision(best)}"  # the forward in the fastest variant's own precision
+        bare = f"ddf_bare_{precision_of(best)}"  # the forward in the fastest variant's own precision
         result.rows.append(_rate_row(f"{set_name}: DDF ({best}) rays/s", timed[best][1],
-                                     f"bare {_precision(best)} network forward rays/s, same entry points", timed[bare][1],
+                                     f"bare {precision_of(best)} network forward rays/s, same entry points", timed[bare][1],
                                      n, ctx, target=BARE_SHARE if ctx.device.startswith("cuda") else None))
         for name in variants:
             if name != "ddf_fp32":
@@ -204,7 +199,7 @@ def _race_all(ctx: Context, result: SectionResult, samples, ddf, nsdf, gsdf, war
         if ctx.device.startswith("cuda") and n >= 1_000_000:
             result.rows.append(compare("race", f"{set_name}: DDF ({best}) rays/s", timed[best][1].rate(n), "rays/s",
                                        "goal 1e9 rays/s (H100/H200, 1M+ rays)", 1e9, device=ctx.device,
-                                       threads=ctx.threads, precision=_precision(best), target=SPEED_GOAL))
+                                       threads=ctx.threads, precision=precision_of(best), target=SPEED_GOAL))
     if any(name.startswith("ddf_bf16_fused") for name in variants):  # last tuned on the 1M incoherent rays
         from ddfbench.models.ddf.fused import config
 
@@ -266,6 +261,6 @@ def capacities(ctx: Context, samples, primary, reference: Callable, meshes: dict
         for ref, label in (("ddf_fp32", "same network fp32"), *((m, f"{m} (Warp) beside it") for m in casts)):
             result.rows.append(compare("race", f"capacity {level} ({info['width']}x{info['depth']}): DDF ({best}) rays/s",
                                        timed[best][1].rate(n), "rays/s", f"{label} rays/s", timed[ref][1].rate(n),
-                                       device=ctx.device, threads=ctx.threads, precision=_precision(best),
+                                       device=ctx.device, threads=ctx.threads, precision=precision_of(best),
                                        note=note if ref == "ddf_fp32" else f"{ref} depth MAE {out[level][ref]['depth_mae']:.2e}"))
     return out

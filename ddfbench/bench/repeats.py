@@ -18,6 +18,7 @@ import os
 import statistics
 import sys
 
+from ddfbench.bench.results import precision_of
 from ddfbench.core.errors import InputError
 from ddfbench.report.stats import sig3, summarize_values
 
@@ -69,7 +70,7 @@ def ratios(run: dict) -> dict[str, float]:
         if "neural SDF device tracer" in roles and "ddf_bf16" in d:  # the method's gap without the DDF's fusion
             out[f"{set_name}: unfused bf16 DDF / neural SDF device tracer"] = (
                 d["ddf_bf16"]["rays_per_s"] / d[roles["neural SDF device tracer"]]["rays_per_s"])
-        bare = f"ddf_bare_{'bf16' if 'bf16' in roles['DDF'] else 'fp32'}"
+        bare = f"ddf_bare_{precision_of(roles['DDF'])}"
         out[f"{set_name}: DDF / its bare forward"] = rate / d[bare]["rays_per_s"]
         for kind, loop in (("neural", "neural_sdf_trace"), ("grid", "grid_sdf_trace")):
             if f"{kind} SDF device tracer" in roles and loop in roles:

@@ -12,6 +12,11 @@ from typing import Any
 _OPS = {">=": operator.ge, "<=": operator.le}
 
 
+def precision_of(contestant: str) -> str:
+    """A row's precision from the contestant it names ("ddf_bf16_compiled" -> "bf16", else "fp32")."""
+    return "bf16" if "bf16" in contestant else "fp32"
+
+
 @dataclass
 class Target:
     """A goal on the row's ratio (on="ratio") or on its value (on="value"): op ">=" or "<=", bound."""

@@ -479,8 +479,7 @@ def renders_faster_on_gpu(records: Records) -> list[Claim]:
             out.append(Claim(name, src, paper, "–", f"`reports/{GPU_RACE_FILE}`", NO_RECORDS,
                              "needs a GPU: tools/device/run_repeats.sh, then python -m ddfbench.bench.repeats"))
             continue
-        logs = [_log_summary(r["values"].values()) for r in found]  # geometric, as the ratios above
-        sides = ["above" if g.lo > 0 else "below" if g.hi < 0 else "straddles" for g in logs]
+        sides = ["above" if r["glo"] > 1 else "below" if r["ghi"] < 1 else "straddles" for r in found]
         verdict = CONFIRMED if sides == ["above"] * 2 else REFUTED if sides == ["below"] * 2 else NOT_SEPARABLE
         ddf_mae, other_mae = rows.get("primary: depth MAE DDF"), rows.get(f"primary: depth MAE {role}")
         if role == "warp_bvh":
@@ -490,9 +489,8 @@ def renders_faster_on_gpu(records: Records) -> list[Claim]:
             accuracy = (f"primary-ray depth MAE DDF {ddf_mae['median']:.2g}, {role} {other_mae['median']:.2g} "
                         "(medians)." if ddf_mae and other_mae else "see the report's depth MAE rows.")
         out.append(Claim(
-            name, src, paper, "; ".join(f"{s} rays {sig3(math.exp(g.mean))}× [{sig3(math.exp(g.lo))}, "
-                                        f"{sig3(math.exp(g.hi))}] (n={g.n} runs)"
-                                        for s, g in zip(("primary", "incoherent"), logs)),
+            name, src, paper, "; ".join(f"{s} rays {_geometric(r)} (n={r['n']} runs)"
+                                        for s, r in zip(("primary", "incoherent"), found)),
             f"`reports/{GPU_RACE_FILE[:-5]}.md` rows '… DDF / {role}' ({where})", verdict,
             "Rays/s ratios of the DDF's fastest variant over the other, each formed in one process on the same rays; "
             "geometric mean over the runs (ray seeds: five views, five incoherent sets; one trained network), 95 % "
@@ -500,9 +498,9 @@ def renders_faster_on_gpu(records: Records) -> list[Claim]:
     return out
 
 
-def _log_summary(values) -> Summary:
-    """Summary of the logs of the positive finite values (a ratio's geometric mean and interval, exponentiated)."""
-    return summarize_values(math.log(v) for v in values if v is not None and math.isfinite(v) and v > 0)
+def _geometric(row: dict) -> str:
+    """A pooled ratio row of bench.repeats: its geometric mean and the 95 % interval of the logs ("3.35× [2.44, 4.59]")."""
+    return f"{sig3(row['gmean'])}× [{sig3(row['glo'])}, {sig3(row['ghi'])}]"
 
 
 def _lod_note(rows: dict[str, dict]) -> str:
@@ -515,9 +513,7 @@ def _lod_note(rows: dict[str, dict]) -> str:
                            key=lambda name: int(name.rsplit("_", 1)[1]))
             lod_mae, cap_mae = rows.get(f"{lod}: depth MAE (primary)"), rows.get(f"{cap}: depth MAE")
             if lod == coarsest and lod_mae and cap_mae:
-                g = _log_summary(r["values"].values())
-                parts.append(f"{cap} / the {lod.rsplit('_', 1)[1]}-triangle LOD {sig3(math.exp(g.mean))}× "
-                             f"[{sig3(math.exp(g.lo))}, {sig3(math.exp(g.hi))}] (n={g.n}) at "
+                parts.append(f"{cap} / the {lod.rsplit('_', 1)[1]}-triangle LOD {_geometric(r)} (n={r['n']}) at "
                              f"{cap_mae['median'] / lod_mae['median']:.2g}× the LOD's depth error")
     return ("at matched accuracy no LOD is as coarse as the DDF: " + "; ".join(parts) + ".") if parts else ""
 

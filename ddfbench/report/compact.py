@@ -8,7 +8,10 @@ the reports write it: a path of the machine that ran it means nothing on a clone
 from this file. The file is deterministic: the
 records sorted by (experiment, key), keys sorted, gzip's timestamp 0, so one set of records gives one file.
 
-`python -m ddfbench.report.compact RESULTS/<experiment> OUT.jsonl.gz` writes one from a folder of run records.
+`python -m ddfbench.report.compact RESULTS/<experiment> OUT.jsonl.gz` writes one from a folder of run records;
+`python -m ddfbench.report.compact --restore IN.jsonl.gz RESULTS` writes its records back as run records
+(RESULTS/<experiment>/<key>/record.json, without their artifacts), so that a sweep cut short on another machine
+resumes on this one: the runner skips every key with an ok record, and the report is written from all of them.
 """
 
 from __future__ import annotations
@@ -16,10 +19,11 @@ from __future__ import annotations
 import argparse
 import gzip
 import json
+import os
 import sys
 from typing import Any
 
-from ddfbench.run.runs import find_records, record_problem
+from ddfbench.run.runs import RECORD_FILE, find_records, record_problem, write_json_atomic
 
 FILE = "records.jsonl.gz"
 OUT_DIR = "out_dir="
@@ -67,11 +71,35 @@ def load_records(source: str) -> list[dict[str, Any]]:
     return read_compact(source) if source.endswith(".jsonl.gz") else find_records(source)
 
 
+def restore(path: str, out_dir: str) -> tuple[int, int]:
+    """Write each record of the compact file at path to out_dir/<experiment>/<key>/record.json, where that folder
+    holds no record yet (a run of this machine is never replaced); return (written, kept)."""
+    written = kept = 0
+    for rec in read_compact(path):
+        target = os.path.join(out_dir, str(rec["experiment"]), str(rec["key"]), RECORD_FILE)
+        if os.path.exists(target):
+            kept += 1
+            continue
+        write_json_atomic(target, {k: v for k, v in rec.items() if k != "_dir"})
+        written += 1
+    return written, kept
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m ddfbench.report.compact", description=__doc__.split("\n")[0])
-    parser.add_argument("records", help="folder of run records, e.g. results/default")
-    parser.add_argument("out", help=f"the compact file to write (conventionally <report folder>/{FILE})")
+    parser.add_argument("records", help="folder of run records, e.g. results/default (with --restore: a compact file)")
+    parser.add_argument("out", help=f"the compact file to write (conventionally <report folder>/{FILE}); with "
+                                    "--restore: the out_dir to write its run records into")
+    parser.add_argument("--restore", action="store_true",
+                        help="write the compact file's records back into an out_dir, so that its sweep resumes")
     args = parser.parse_args(argv)
+    if args.restore:
+        if not os.path.isfile(args.records):
+            print(f"ddfbench.report.compact: {args.records}: no such compact file", file=sys.stderr)
+            return 2
+        written, kept = restore(args.records, args.out)
+        print(f"restored {written} records into {args.out} ({kept} already there, kept)")
+        return 0
     records = find_records(args.records)
     if not records:
         print(f"ddfbench.report.compact: {args.records}: no run records", file=sys.stderr)

@@ -1,11 +1,13 @@
-"""`python -m ddfbench.suite run NAME --tier TIER [--dry-run] [--results DIR] [-- OVERRIDE ...]` and `python -m ddfbench.suite status NAME`.
+"""`python -m ddfbench.suite run NAME --tier TIER [--dry-run] [--from-reports] [--results DIR] [-- OVERRIDE ...]` and
+`python -m ddfbench.suite status NAME`.
 
 A suite file (conf/suite/<name>.yaml) names the benchmark: per tier, each experiment with the report folder it
 writes and the overrides its command line adds. `run --dry-run` prints each experiment's jobs per model and its
 estimated CPU-hours, from the committed records' wall time per job (the report's own records.jsonl.gz at the job's
 capacity level, else of its model, else any committed record of the same model, else unknown; a wall-clock job costs
 at least its bound); `run` runs each experiment (Hydra resumes finished jobs and
-prints a progress line per job with an ETA), then writes its report. `status` says, per report, the code commit
+prints a progress line per job with an ETA), then writes its report; with --from-reports it first restores the
+reports' committed records into the results folder, so that a tier resumes across machines. `status` says, per report, the code commit
 its records come from and whether the code or config of a model it ran changed since (stale), by `git diff`.
 """
 
@@ -197,14 +199,21 @@ def print_plan(rows: list[dict[str, Any]]) -> None:
           "one job at a time; more with unmeasured models)")
 
 
-def run(suite: str, tier: str, results: str, extra: list[str] | None = None) -> int:
+def run(suite: str, tier: str, results: str, extra: list[str] | None = None, from_reports: bool = False) -> int:
     """Run every experiment of the tier into results/ (resuming) with the suite's overrides and then `extra` (e.g. a
-    launcher, threads), then write its report; the worst exit code."""
+    launcher, threads), then write its report; the worst exit code. from_reports: first restore each report's
+    committed records into results/ (compact.restore), so that a tier cut short on another machine goes on where
+    its committed records end (the report refuses records of two code commits: run it from the records' commit)."""
     tiers = load_suite(suite)
     if tier not in tiers:
         raise InputError(f"suite {suite}: no tier '{tier}' (tiers: {', '.join(tiers)})")
     rc = 0
     for entry in tiers[tier]:
+        committed = os.path.join(ROOT, entry.report, compact.FILE)
+        if from_reports and os.path.isfile(committed):
+            written, kept = compact.restore(committed, results)
+            print(f"{entry.experiment}: restored {written} committed records from {entry.report} ({kept} already "
+                  "in results)", flush=True)
         cmd = [sys.executable, "-m", "ddfbench", f"+experiment={entry.experiment}", f"out_dir={results}", "quiet=true",
                *entry.overrides, *(extra or [])]
         print("$", " ".join(cmd[1:]), flush=True)
@@ -278,6 +287,9 @@ def main(argv: list[str] | None = None) -> int:
     run_p.add_argument("--tier", required=True)
     run_p.add_argument("--dry-run", action="store_true")
     run_p.add_argument("--results", default="results", help="out_dir of the runs (default: results)")
+    run_p.add_argument("--from-reports", action="store_true",
+                       help="first restore each report's committed records into --results: finished runs are "
+                            "skipped and the report is written from all of them (resume a tier across machines)")
     status_p = sub.add_parser("status", help="which reports are stale")
     status_p.add_argument("suite")
     argv = sys.argv[1:] if argv is None else argv
@@ -289,7 +301,7 @@ def main(argv: list[str] | None = None) -> int:
         if args.dry_run:
             print_plan(plan(args.suite, args.tier))
             return 0
-        return run(args.suite, args.tier, args.results, overrides)
+        return run(args.suite, args.tier, args.results, overrides, args.from_reports)
     except InputError as exc:
         print(f"ddfbench.suite: {exc}", file=sys.stderr)
         return 2
