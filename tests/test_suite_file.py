@@ -55,6 +55,9 @@ def test_a_job_costs_what_its_own_level_cost_and_a_wall_clock_job_at_least_its_b
 def test_a_bad_suite_or_tier_is_one_line_naming_it(tmp_path, monkeypatch):
     with pytest.raises(InputError, match=r"suite v1: no tier 'fast' \(tiers: core, long, gpu\)"):
         suite.plan("v1", "fast")
+    with pytest.raises(InputError, match=r"suite v1, tier core: no experiment gan_epochs \(it has default, "):
+        suite.plan("v1", "core", only=["default", "gan_epochs"])
+    assert [r["experiment"] for r in suite.plan("v1", "long", only=["paper_ddf", "storage"])] == ["storage", "paper_ddf"]
     (tmp_path / "suite").mkdir()
     (tmp_path / "experiment").mkdir()
     (tmp_path / "suite" / "bad.yaml").write_text("tiers:\n  core:\n    nonesuch: {report: reports/x}\n")
@@ -107,13 +110,14 @@ def test_run_from_reports_restores_each_report_s_committed_records_before_its_sw
     class Done:
         returncode = 0
 
-    monkeypatch.setattr(suite, "load_suite", lambda name: {"core": [suite.Entry("default", "reports/default")]})
     monkeypatch.setattr(suite.subprocess, "run", lambda cmd, **_: commands.append(cmd) or Done())
-    assert suite.main(["run", "v1", "--tier", "core", "--results", str(tmp_path), "--from-reports"]) == 0
+    assert suite.main(["run", "v1", "--tier", "core", "--only", "default", "--results", str(tmp_path),
+                       "--from-reports"]) == 0
     committed = compact.read_compact(os.path.join(suite.ROOT, "reports", "default", compact.FILE))
     assert sorted(os.listdir(tmp_path / "default")) == sorted(r["key"] for r in committed)
     assert f"default: restored {len(committed)} committed records" in capsys.readouterr().out
-    assert len(commands) == 2  # the sweep (which now skips them), then the report
+    assert [c[2:4] for c in commands] == [["ddfbench", "+experiment=default"],  # the sweep (now skipping them)
+                                          ["ddfbench.report", os.path.join(str(tmp_path), "default")]]
 
 
 def test_the_version_is_the_suite_s_and_the_changelog_opens_with_it():

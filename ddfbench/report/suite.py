@@ -1,5 +1,5 @@
-"""`python -m ddfbench.suite run NAME --tier TIER [--dry-run] [--from-reports] [--results DIR] [-- OVERRIDE ...]` and
-`python -m ddfbench.suite status NAME`.
+"""`python -m ddfbench.suite run NAME --tier TIER [--only EXP,...] [--dry-run] [--from-reports] [--results DIR]
+[-- OVERRIDE ...]` and `python -m ddfbench.suite status NAME`.
 
 A suite file (conf/suite/<name>.yaml) names the benchmark: per tier, each experiment with the report folder it
 writes and the overrides its command line adds. `run --dry-run` prints each experiment's jobs per model and its
@@ -166,14 +166,25 @@ def job_seconds(entry: Entry, job: Job, records: dict[str, list[dict[str, Any]]]
     return None, "no record"
 
 
-def plan(suite: str, tier: str, reports: str = os.path.join(ROOT, "reports")) -> list[dict[str, Any]]:
-    """Per experiment of the tier: jobs, estimated CPU-hours (None when a model has no measured record), sources."""
+def tier_entries(suite: str, tier: str, only: list[str] | None = None) -> list[Entry]:
+    """The tier's experiments, or those of them named in only (an unknown tier or name: InputError naming it)."""
     tiers = load_suite(suite)
     if tier not in tiers:
         raise InputError(f"suite {suite}: no tier '{tier}' (tiers: {', '.join(tiers)})")
+    names = [e.experiment for e in tiers[tier]]
+    unknown = [n for n in only or [] if n not in names]
+    if unknown:
+        raise InputError(f"suite {suite}, tier {tier}: no experiment {', '.join(unknown)} (it has {', '.join(names)})")
+    return [e for e in tiers[tier] if not only or e.experiment in only]
+
+
+def plan(suite: str, tier: str, reports: str = os.path.join(ROOT, "reports"),
+         only: list[str] | None = None) -> list[dict[str, Any]]:
+    """Per experiment of the tier (or of only): jobs, estimated CPU-hours (None when a model has no measured
+    record), sources."""
     records = committed_records(reports)
     rows = []
-    for entry in tiers[tier]:
+    for entry in tier_entries(suite, tier, only):
         sweep = expand(entry)
         hours, unknown, sources = 0.0, set(), set()
         for job, n in sweep.jobs.items():
@@ -199,16 +210,15 @@ def print_plan(rows: list[dict[str, Any]]) -> None:
           "one job at a time; more with unmeasured models)")
 
 
-def run(suite: str, tier: str, results: str, extra: list[str] | None = None, from_reports: bool = False) -> int:
+def run(suite: str, tier: str, results: str, extra: list[str] | None = None, from_reports: bool = False,
+        only: list[str] | None = None) -> int:
     """Run every experiment of the tier into results/ (resuming) with the suite's overrides and then `extra` (e.g. a
     launcher, threads), then write its report; the worst exit code. from_reports: first restore each report's
     committed records into results/ (compact.restore), so that a tier cut short on another machine goes on where
-    its committed records end (the report refuses records of two code commits: run it from the records' commit)."""
-    tiers = load_suite(suite)
-    if tier not in tiers:
-        raise InputError(f"suite {suite}: no tier '{tier}' (tiers: {', '.join(tiers)})")
+    its committed records end (the report refuses records of two code commits: run it from the records' commit).
+    only: the tier's experiments to run (default: all)."""
     rc = 0
-    for entry in tiers[tier]:
+    for entry in tier_entries(suite, tier, only):
         committed = os.path.join(ROOT, entry.report, compact.FILE)
         if from_reports and os.path.isfile(committed):
             written, kept = compact.restore(committed, results)
@@ -287,6 +297,7 @@ def main(argv: list[str] | None = None) -> int:
     run_p.add_argument("--tier", required=True)
     run_p.add_argument("--dry-run", action="store_true")
     run_p.add_argument("--results", default="results", help="out_dir of the runs (default: results)")
+    run_p.add_argument("--only", help="comma-separated experiments of the tier to run or plan (default: all)")
     run_p.add_argument("--from-reports", action="store_true",
                        help="first restore each report's committed records into --results: finished runs are "
                             "skipped and the report is written from all of them (resume a tier across machines)")
@@ -298,10 +309,11 @@ def main(argv: list[str] | None = None) -> int:
     try:
         if args.command == "status":
             return status(args.suite)
+        only = [n for n in (args.only or "").split(",") if n] or None
         if args.dry_run:
-            print_plan(plan(args.suite, args.tier))
+            print_plan(plan(args.suite, args.tier, only=only))
             return 0
-        return run(args.suite, args.tier, args.results, overrides, args.from_reports)
+        return run(args.suite, args.tier, args.results, overrides, args.from_reports, only)
     except InputError as exc:
         print(f"ddfbench.suite: {exc}", file=sys.stderr)
         return 2
