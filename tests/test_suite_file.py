@@ -18,7 +18,7 @@ def test_the_core_plan_expands_each_experiment_as_its_sweep_does():
     assert rows["default"]["jobs"] == len(plugins.members("model", "default")) * 3  # seed=0,1,2 in the suite file
     assert rows["representations"]["jobs"] == len(plugins.members("model", "representations")) * 4 * 5
     assert rows["default"]["cpu_hours"] > 0 and rows["default"]["sources"] == ["reports/default"]
-    rows = {r["experiment"]: r for r in suite.plan("v1", "long")}
+    rows = {r["experiment"]: r for r in suite.plan("v1", "long", only=["shape_suite", "tune_finalists"])}
     assert rows["shape_suite"]["jobs"] == len(plugins.members("model", "shape_suite")) * 12 * 3
     assert rows["tune_finalists"]["jobs"] == len(plugins.members("model", "tune_finalists")) * 3 * 4 * 3
 
@@ -44,8 +44,16 @@ def test_a_job_costs_what_its_own_level_cost_and_a_wall_clock_job_at_least_its_b
     clock = suite.Job("m", "c1", "wall-clock", 600.0)
     assert suite.job_seconds(entry, clock, records) == (602, "reports/pareto")  # 600 s + 2 s outside the fit
     assert suite.job_seconds(entry, suite.Job("x", "c1", "wall-clock", 600.0), records) == (None, "no record")
-    long = {r["experiment"]: r for r in suite.plan("v1", "long")}
+    long = {r["experiment"]: r for r in suite.plan("v1", "long", only=["convergence", "gan_epochs"])}
     assert long["convergence"]["cpu_hours"] >= long["convergence"]["jobs"] * 600 / 3600
+    # a fixed-work job's fit time is scaled to its own steps or epochs: 10 s outside the fit + 20 s x 40 / 0.5
+    short = {**timed("g", "", 30, 20), "fit": {"seconds": 20, "epochs": 0.5, "steps": 100}}
+    assert suite.job_seconds(entry, suite.Job("g", "", "epochs", 0.0, 40.0), {"r": [short]}) == (1610, "other reports")
+    assert suite.job_seconds(entry, suite.Job("g", "", "steps", 0.0, 200.0), {"r": [short]}) == (50, "other reports")
+    assert suite.job_seconds(entry, suite.Job("g", "", "steps", 0.0), {"r": [short]}) == (30, "other reports")
+    # the thesis GAN's 40 epochs (model.epochs through the experiment's interpolation), 5 seeds: hours, not minutes
+    assert {job.work for job in suite.expand(suite.Entry("gan_epochs", "x")).jobs} == {40.0}
+    assert long["gan_epochs"]["cpu_hours"] > 5
     # a swept bound is each job's own: 20 s and 80 s jobs
     swept = suite.expand(suite.Entry("convergence", "x", ["train.max_seconds=20,80"]))
     assert {job.max_seconds for job in swept.jobs} == {20.0, 80.0}

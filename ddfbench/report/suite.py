@@ -64,18 +64,21 @@ def load_suite(name: str) -> dict[str, list[Entry]]:
 
 @dataclass(frozen=True)
 class Job:
-    """What a job's cost depends on: its model, capacity level ("" when the sweep sets none) and fit budget
-    (train.budget; train.max_seconds, the wall-clock bound), as its own overrides or else the experiment set them."""
+    """What a job's cost depends on: its model, capacity level ("" when the sweep sets none) and fit budget as its
+    composed config gives it (train.budget; train.max_seconds, the wall-clock bound; work: train.max_steps or
+    train.max_epochs of a steps or epochs budget, 0 when unknown)."""
 
     model: str
     level: str
     budget: str
     max_seconds: float
+    work: float = 0.0
 
 
 @dataclass
 class Sweep:
-    """An experiment's sweep as Hydra's basic sweeper expands it (no job composed): how many jobs of each kind."""
+    """An experiment's sweep as Hydra's basic sweeper expands it (one job composed per model, level and budget): how
+    many jobs of each kind."""
 
     jobs: dict[Job, int]
 
@@ -101,17 +104,29 @@ def expand(entry: Entry) -> Sweep:
         master = loader.load_configuration("config", overrides, run_mode=RunMode.MULTIRUN)
         params = [f"{k}={v}" for k, v in (master.hydra.sweeper.get("params") or {}).items()]
         parsed = OverridesParser.create(config_loader=loader).parse_overrides(params + overrides)
-        default_model = str(master.hydra.runtime.choices.get("model", "?"))
-        train = master.get("train") or {}
         jobs: dict[Job, int] = {}
+        budgets: dict[tuple[str, ...], tuple[str, str, str, float, float]] = {}
         for batch in BasicSweeper.split_arguments(parsed, None):
             for overrides in batch:
-                values = {k.lstrip("+"): v for k, v in (o.split("=", 1) for o in overrides if "=" in o)}
-                job = Job(values.get("model", default_model), values.get("capacity", ""),
-                          values.get("train.budget", str(train.get("budget", "steps"))),
-                          float(values.get("train.max_seconds", train.get("max_seconds") or 0.0)))
+                what = tuple(o for o in overrides if o.split("=", 1)[0].lstrip("+") not in ("seed", "shape"))
+                if what not in budgets:  # compose one job per model, level and budget: what its cost depends on
+                    budgets[what] = _budget(loader.load_sweep_config(master, list(overrides)))
+                job = Job(*budgets[what])
                 jobs[job] = jobs.get(job, 0) + 1
         return Sweep(jobs)
+
+
+def _budget(cfg: Any) -> tuple[str, str, str, float, float]:
+    """(model, level, budget, max_seconds, work) of one job's composed config (hydra node included)."""
+    from hydra.core.hydra_config import HydraConfig
+
+    HydraConfig.instance().set_config(cfg)  # as the job itself resolves its interpolations
+    choices = cfg.hydra.runtime.choices
+    train = cfg.get("train") or {}
+    budget = str(train.get("budget", "steps"))
+    work = {"steps": train.get("max_steps"), "epochs": train.get("max_epochs")}.get(budget)
+    level = next((o.split("=", 1)[1] for o in cfg.hydra.overrides.task if o.lstrip("+").startswith("capacity=")), "")
+    return (str(choices.get("model", "?")), level, budget, float(train.get("max_seconds") or 0.0), float(work or 0.0))
 
 
 def jobs_per_model(entry: Entry) -> dict[str, int]:
@@ -140,12 +155,25 @@ def committed_records(reports: str) -> dict[str, list[dict[str, Any]]]:
     return out
 
 
+def _scaled_seconds(rec: dict[str, Any], job: Job) -> float:
+    """A record's wall seconds for the job's fixed work: its fit time scaled by the job's steps or epochs over the
+    record's own (a 40-epoch job from a 0.06-epoch record), plus what it spent outside the fit; unscaled where
+    either side's work is unknown."""
+    fit = rec.get("fit") or {}
+    done = {"steps": fit.get("steps"), "epochs": fit.get("epochs")}.get(job.budget)
+    wall = _seconds(rec) or 0.0
+    if not (job.work > 0 and done and fit.get("seconds")):
+        return wall
+    return wall - float(fit["seconds"]) + float(fit["seconds"]) * job.work / float(done)
+
+
 def job_seconds(entry: Entry, job: Job, records: dict[str, list[dict[str, Any]]]) -> tuple[float | None, str]:
     """Wall seconds of one job and where they were measured: the median of the first non-empty of (the entry's
     report, same model and level), (the entry's report, same model), (any report of the same experiment, model and
     level), (any report, same model). A level's meaning is its experiment's, so another experiment's records count
-    only by model. A wall-clock job costs at least its bound plus what the measured jobs spent outside their fit
-    (evaluation, rendering, accuracy probes: a lower bound where they took fewer probes)."""
+    only by model. A fixed-work job's fit time is scaled to its steps or epochs; a wall-clock job costs at least its
+    bound plus what the measured jobs spent outside their fit (evaluation, rendering, accuracy probes: a lower bound
+    where they took fewer probes)."""
     model, level = job.model, job.level
     candidates = (
         (entry.report, lambda folder, r: folder == entry.report and r.get("model") == model and _level(r) == level),
@@ -157,7 +185,7 @@ def job_seconds(entry: Entry, job: Job, records: dict[str, list[dict[str, Any]]]
     for source, matches in candidates:
         found = [r for folder, recs in records.items() for r in recs if matches(folder, r) and _seconds(r) is not None]
         if found:
-            seconds = statistics.median(_seconds(r) for r in found)
+            seconds = statistics.median(_scaled_seconds(r, job) for r in found)
             if job.budget == "wall-clock":
                 outside = statistics.median(max(0.0, _seconds(r) - float((r.get("fit") or {}).get("seconds") or 0.0))
                                             for r in found)
