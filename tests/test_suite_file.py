@@ -93,6 +93,9 @@ def test_status_is_current_at_head_and_names_what_changed_but_not_a_membership_c
     assert "ddfbench/truth/catalog.py" in changed and "conf/model/grid_sdf.yaml" not in changed
     assert suite._only_membership_changed(before, "conf/model/grid_sdf.yaml")
     assert not suite._only_membership_changed(before, "conf/model/neural_sdf.yaml")  # gained its grid keys since
+    # a048786 added the device tracer to ddfbench/evaluate, a stage every run depends on; no run's code changed by it
+    _, changed = suite.stale(entry, [record(sha("a048786~1"), "grid_sdf", "grid_sdf")])
+    assert "ddfbench/evaluate/trace_device.py" not in changed
     assert os.path.isfile(os.path.join(ROOT, "conf", "suite", "v1.yaml"))
 
 

@@ -264,7 +264,8 @@ def run(suite: str, tier: str, results: str, extra: list[str] | None = None, fro
 
 
 def stale(entry: Entry, records: list[dict[str, Any]]) -> tuple[str, list[str]]:
-    """(the records' code commit(s), files of the models' families and configs changed since the oldest one)."""
+    """(the records' code commit(s), files of the models' families and configs changed or removed since the oldest
+    one; a file added since is not a change to the code that ran)."""
     shas = sorted({str((r.get("env") or {}).get("code_sha")) for r in records if (r.get("env") or {}).get("code_sha")})
     if not shas:
         return "no records", []
@@ -279,7 +280,8 @@ def stale(entry: Entry, records: list[dict[str, Any]]) -> tuple[str, list[str]]:
     existing = sorted(p for p in paths if os.path.exists(os.path.join(ROOT, p)))
     changed = []
     for sha in shas:
-        done = subprocess.run(["git", "-C", ROOT, "diff", "--name-only", sha, "HEAD", "--", *existing],
+        # a file added since cannot change what the records' code did (what uses it changed too): not counted
+        done = subprocess.run(["git", "-C", ROOT, "diff", "--name-only", "--diff-filter=a", sha, "HEAD", "--", *existing],
                               capture_output=True, text=True)
         if done.returncode != 0:
             return ", ".join(s[:7] for s in shas), [f"commit {sha[:7]} is not in this clone"]
