@@ -410,7 +410,9 @@ def test_the_gpu_race_claims_read_the_committed_repeats_file(tmp_path):
     os.makedirs(path.parent)
     rows += [row("capacity c2 (128x4): DDF / mesh_lod_1000", [1.0, 1.2, 0.9], (1.03, 0.72, 1.47)),
              row("capacity c2 (128x4): DDF / mesh_lod_4000", [1.5, 1.4, 1.6], (1.5, 1.27, 1.76)),
-             row("capacity c2 (128x4): DDF / mesh_lod_16000", [2.5], (2.5, 2.5, 2.5)),  # one run: not quoted
+             row("capacity c1 (64x3): DDF / mesh_lod_1000", [1.9], (1.9, 1.9, 1.9)),  # c1's coarsest LOD in one run
+             row("capacity c1 (64x3): DDF / mesh_lod_4000", [2.5, 2.4], (2.45, 2.0, 3.0)),
+             {**row("capacity c1 (64x3): depth MAE", [0.03] * 2), "median": 0.03},
              {**row("capacity c2 (128x4): depth MAE", [0.02] * 3), "median": 0.02},
              {**row("mesh_lod_1000: depth MAE (primary)", [0.004] * 3), "median": 0.004},
              {**row("primary: depth MAE DDF", [0.02] * 3), "median": 0.02}]
@@ -422,7 +424,12 @@ def test_the_gpu_race_claims_read_the_committed_repeats_file(tmp_path):
     assert "GPU X, 3 fresh processes, code abc1234" in bvh.rows
     # the coarsest LOD beside capacity c2 measured twice or more, at 0.02 / 0.004 = 5x the LOD's depth error
     assert "c2 (128x4) / the 1000-triangle LOD 1.03× [0.72, 1.47] (n=3) at 5× the LOD's" in bvh.convention
-    assert "4000-triangle" not in bvh.convention and "16000-triangle" not in bvh.convention
+    assert "4000-triangle" not in bvh.convention and "c1 (64x3)" not in bvh.convention  # one run: not quoted
     assert out["DDF renders faster than the neural SDF, sphere traced on the GPU"].verdict == cl.NOT_SEPARABLE
     assert out["DDF renders faster than the grid SDF, sphere traced on the GPU"].verdict == cl.NO_RECORDS
+    # a file pooled by older code (no geometric columns) reads as no records, not a crash
+    rows[0] = {k: v for k, v in rows[0].items() if k not in ("gmean", "glo", "ghi")}
+    path.write_text(json.dumps({"rows": rows, "gpu": ["GPU X"], "runs": ["a", "b", "c"], "commits": ["abc1234"] * 3}))
+    old = {c.claim: c for c in cl.renders_faster_on_gpu(cl.load_committed(str(tmp_path)))}
+    assert old["DDF renders faster than a GPU BVH (Warp)"].verdict == cl.NO_RECORDS
     assert all(c.verdict == cl.NO_RECORDS for c in cl.renders_faster_on_gpu(cl.load_committed(str(tmp_path / "none"))))

@@ -142,21 +142,28 @@ def test_the_compact_command_packs_a_folder_of_records(results, tmp_path, capsys
 
 
 def test_restored_records_resume_a_sweep_on_another_machine(results, tmp_path, capsys):
-    """A compact file written back as run records: the runner skips its finished runs (no fit, no artifact written),
-    reruns its failed one, never replaces a record already there, and the report of the folder is the same."""
-    packed = compact.write_compact(compact.load_records(str(results)), str(tmp_path / "r.jsonl.gz"))
+    """A compact file written back as run records: the runner skips its finished runs (no fit, no artifact written);
+    a failed or older record, or one whose key is not a run folder, is left out (its run goes again); a record
+    already there is never replaced; the report of the folder is the compact file's."""
+    records = compact.load_records(str(results))
+    ok = [r for r in records if r["status"] == "ok"]
+    crafted = [{**ok[0], "key": "../../escaped"}, {**ok[0], "key": "0123456789abcdef", "schema_version": 0}]
+    packed = compact.write_compact(records + crafted, str(tmp_path / "r.jsonl.gz"))
     other = tmp_path / "other_machine"
     assert compact.main(["--restore", packed, str(other)]) == 0
-    assert "restored 3 records" in capsys.readouterr().out
-    assert compact.restore(packed, str(other)) == (0, 3)
+    said = capsys.readouterr()
+    assert "restored 2 records" in said.out and "key '../../escaped' is not a run folder" in said.err
+    assert sorted(os.listdir(other / "single")) == sorted(r["key"] for r in ok)  # nothing escaped, no old schema
+    assert not (tmp_path / "escaped").exists()
+    assert compact.restore(packed, str(other)) == (0, 2, 3)
     restored = {r["key"]: r for r in compact.load_records(str(other / "single"))}
     seed0 = runner.run(compose("shape=cube", "model=mesh", "seed=0", out_dir=other))
     assert seed0["started"] == restored[seed0["key"]]["started"]
     assert os.listdir(other / "single" / seed0["key"]) == ["record.json"]  # nothing was fit or meshed
-    rerun = runner.run(compose("shape=cube", "model=mesh", "eval.n_points=0", out_dir=other))
-    assert rerun["status"] == "failed" and rerun["started"] != restored[rerun["key"]]["started"]
+    failed = runner.run(compose("shape=cube", "model=mesh", "eval.n_points=0", out_dir=other))
+    assert failed["status"] == "failed" and failed["key"] not in restored  # it ran again
     assert report_main([str(other / "single"), "--out", str(tmp_path / "a"), "--plots", "none"]) == 0
-    assert report_main([packed, "--out", str(tmp_path / "b"), "--plots", "none"]) == 0
+    assert report_main([str(results), "--out", str(tmp_path / "b"), "--plots", "none"]) == 0
     assert (tmp_path / "a" / "table.md").read_text() == (tmp_path / "b" / "table.md").read_text()
     assert compact.main(["--restore", str(tmp_path / "none.jsonl.gz"), str(other)]) == 2
 

@@ -9,6 +9,7 @@ import pytest
 from ddfbench.core import plugins
 from ddfbench.core.errors import InputError
 from ddfbench.report import compact, suite
+from ddfbench.run import runs
 
 ROOT = suite.ROOT
 
@@ -51,6 +52,11 @@ def test_a_job_costs_what_its_own_level_cost_and_a_wall_clock_job_at_least_its_b
     assert suite.job_seconds(entry, suite.Job("g", "", "epochs", 0.0, 40.0), {"r": [short]}) == (1610, "other reports")
     assert suite.job_seconds(entry, suite.Job("g", "", "steps", 0.0, 200.0), {"r": [short]}) == (50, "other reports")
     assert suite.job_seconds(entry, suite.Job("g", "", "steps", 0.0), {"r": [short]}) == (30, "other reports")
+    no_epochs = {**short, "fit": {"seconds": 20, "epochs": None, "steps": 100}}  # unknown work: unscaled
+    assert suite.job_seconds(entry, suite.Job("g", "", "epochs", 0.0, 40.0), {"r": [no_epochs]}) == (30, "other reports")
+    # a level's own steps (conf/model/*.yaml experiments part: pareto's c1 of the tuned GAN is 9 steps)
+    levels = {job.level: job.work for job in suite.expand(suite.Entry("pareto", "x")).jobs if job.model == "gan_sdf_tuned"}
+    assert levels["c1"] == 9.0 and levels["c1"] < levels["c4"]
     # the thesis GAN's 40 epochs (model.epochs through the experiment's interpolation), 5 seeds: hours, not minutes
     assert {job.work for job in suite.expand(suite.Entry("gan_epochs", "x")).jobs} == {40.0}
     assert long["gan_epochs"]["cpu_hours"] > 5
@@ -95,7 +101,7 @@ def test_status_is_current_at_head_and_names_what_changed_but_not_a_membership_c
     assert not suite._only_membership_changed(before, "conf/model/neural_sdf.yaml")  # gained its grid keys since
     # a048786 added the device tracer to ddfbench/evaluate, a stage every run depends on; no run's code changed by it
     _, changed = suite.stale(entry, [record(sha("a048786~1"), "grid_sdf", "grid_sdf")])
-    assert "ddfbench/evaluate/trace_device.py" not in changed
+    assert "ddfbench/evaluate/trace_device.py" not in changed and not any(c.startswith("commit") for c in changed)
     assert os.path.isfile(os.path.join(ROOT, "conf", "suite", "v1.yaml"))
 
 
@@ -122,11 +128,22 @@ def test_run_from_reports_restores_each_report_s_committed_records_before_its_sw
         returncode = 0
 
     monkeypatch.setattr(suite.subprocess, "run", lambda cmd, **_: commands.append(cmd) or Done())
+    committed = compact.read_compact(os.path.join(suite.ROOT, "reports", "default", compact.FILE))
+    (records_commit,) = runs.code_commits(committed)
+    # from a checkout of other code: refused before any run, naming the report and both commits
+    monkeypatch.setenv(runs.GIT_SHA_ENV, "0" * 40)
+    assert suite.main(["run", "v1", "--tier", "core", "--only", "default", "--results", str(tmp_path),
+                       "--from-reports"]) == 2
+    err = capsys.readouterr().err
+    assert f"reports/default's records are of code {records_commit[:7]}, this checkout's code is 0000000" in err
+    assert commands == [] and not (tmp_path / "default").exists()
+    # from a worktree at the records' commit: every ok record is restored, then the sweep and the report run
+    monkeypatch.setenv(runs.GIT_SHA_ENV, records_commit)
     assert suite.main(["run", "v1", "--tier", "core", "--only", "default", "--results", str(tmp_path),
                        "--from-reports"]) == 0
-    committed = compact.read_compact(os.path.join(suite.ROOT, "reports", "default", compact.FILE))
-    assert sorted(os.listdir(tmp_path / "default")) == sorted(r["key"] for r in committed)
-    assert f"default: restored {len(committed)} committed records" in capsys.readouterr().out
+    ok = sorted(r["key"] for r in committed if r["status"] == "ok")
+    assert sorted(os.listdir(tmp_path / "default")) == ok
+    assert f"default: restored {len(ok)} committed records" in capsys.readouterr().out
     assert [c[2:4] for c in commands] == [["ddfbench", "+experiment=default"],  # the sweep (now skipping them)
                                           ["ddfbench.report", os.path.join(str(tmp_path), "default")]]
 

@@ -475,7 +475,7 @@ def renders_faster_on_gpu(records: Records) -> list[Claim]:
                         ("the grid SDF, sphere traced on the GPU", "grid SDF device tracer")):
         name = f"DDF renders faster than {other}"
         found = [rows.get(f"{s}: DDF / {role}") for s in ("primary", "incoherent")]
-        if not all(found):
+        if not all(r and {"gmean", "glo", "ghi"} <= set(r) for r in found):  # absent, or pooled by older code
             out.append(Claim(name, src, paper, "–", f"`reports/{GPU_RACE_FILE}`", NO_RECORDS,
                              "needs a GPU: tools/device/run_repeats.sh, then python -m ddfbench.bench.repeats"))
             continue
@@ -507,7 +507,7 @@ def _lod_note(rows: dict[str, dict]) -> str:
     """At matched accuracy: each capacity measured twice or more against the coarsest LOD raced beside it."""
     parts = []
     for q, r in rows.items():
-        if q.startswith("capacity ") and ": DDF / mesh_lod_" in q and r["n"] >= 2:
+        if q.startswith("capacity ") and ": DDF / mesh_lod_" in q and r["n"] >= 2 and "gmean" in r:
             cap, lod = q.split(":")[0], q.split("/ ")[1]
             coarsest = min((k.split("/ ")[1] for k in rows if k.startswith(f"{cap}: DDF / mesh_lod_")),
                            key=lambda name: int(name.rsplit("_", 1)[1]))

@@ -20,12 +20,14 @@ import argparse
 import gzip
 import json
 import os
+import re
 import sys
 from typing import Any
 
-from ddfbench.run.runs import RECORD_FILE, find_records, record_problem, write_json_atomic
+from ddfbench.run.runs import RECORD_FILE, SCHEMA_VERSION, find_records, record_problem, write_json_atomic
 
 FILE = "records.jsonl.gz"
+KEY = re.compile(r"[0-9a-f]{16}")  # runs.config_key
 OUT_DIR = "out_dir="
 
 
@@ -71,18 +73,30 @@ def load_records(source: str) -> list[dict[str, Any]]:
     return read_compact(source) if source.endswith(".jsonl.gz") else find_records(source)
 
 
-def restore(path: str, out_dir: str) -> tuple[int, int]:
-    """Write each record of the compact file at path to out_dir/<experiment>/<key>/record.json, where that folder
-    holds no record yet (a run of this machine is never replaced); return (written, kept)."""
-    written = kept = 0
+def restore(path: str, out_dir: str) -> tuple[int, int, int]:
+    """Write each ok record of the current schema in the compact file at path (what the runner skips) to
+    out_dir/<experiment>/<key>/record.json, where that folder holds no record yet (a run of this machine is never
+    replaced); return (written, kept, left out). A failed or older record is left out (its run goes again), as is
+    one whose experiment or key is not a plain folder name, with one stderr line naming it."""
+    from ddfbench.run.checks import SAFE_NAME  # the run folders' rule (checks imports the families: torch)
+
+    written = kept = left = 0
     for rec in read_compact(path):
-        target = os.path.join(out_dir, str(rec["experiment"]), str(rec["key"]), RECORD_FILE)
+        experiment, key = rec["experiment"], rec["key"]
+        if not (KEY.fullmatch(key) and SAFE_NAME.fullmatch(experiment) and ".." not in experiment):
+            print(f"ddfbench: skipped {path}: experiment {experiment!r}, key {key!r} is not a run folder", file=sys.stderr)
+            left += 1
+            continue
+        if rec.get("status") != "ok" or rec.get("schema_version") != SCHEMA_VERSION:
+            left += 1
+            continue
+        target = os.path.join(out_dir, experiment, key, RECORD_FILE)
         if os.path.exists(target):
             kept += 1
             continue
         write_json_atomic(target, {k: v for k, v in rec.items() if k != "_dir"})
         written += 1
-    return written, kept
+    return written, kept, left
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -97,8 +111,9 @@ def main(argv: list[str] | None = None) -> int:
         if not os.path.isfile(args.records):
             print(f"ddfbench.report.compact: {args.records}: no such compact file", file=sys.stderr)
             return 2
-        written, kept = restore(args.records, args.out)
-        print(f"restored {written} records into {args.out} ({kept} already there, kept)")
+        written, kept, left = restore(args.records, args.out)
+        print(f"restored {written} records into {args.out} ({kept} already there, kept; {left} failed, older or "
+              "misnamed, left out: their runs go again)")
         return 0
     records = find_records(args.records)
     if not records:

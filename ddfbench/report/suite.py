@@ -5,7 +5,7 @@ A suite file (conf/suite/<name>.yaml) names the benchmark: per tier, each experi
 writes and the overrides its command line adds. `run --dry-run` prints each experiment's jobs per model and its
 estimated CPU-hours, from the committed records' wall time per job (the report's own records.jsonl.gz at the job's
 capacity level, else of its model, else any committed record of the same model, else unknown; a wall-clock job costs
-at least its bound); `run` runs each experiment (Hydra resumes finished jobs and
+at least its bound; a fixed-work job's fit time is scaled to its own steps or epochs); `run` runs each experiment (Hydra resumes finished jobs and
 prints a progress line per job with an ETA), then writes its report; with --from-reports it first restores the
 reports' committed records into the results folder, so that a tier resumes across machines. `status` says, per report, the code commit
 its records come from and whether the code or config of a model it ran changed since (stale), by `git diff`.
@@ -22,12 +22,13 @@ import sys
 from dataclasses import dataclass, field
 from typing import Any
 
-from omegaconf import OmegaConf
+from omegaconf import OmegaConf, open_dict
 
 from ddfbench.core import plugins
 from ddfbench.core.errors import InputError
 from ddfbench.core.plugins import CONF_DIR
 from ddfbench.report import compact
+from ddfbench.run import runs
 
 ROOT = os.path.dirname(CONF_DIR)
 
@@ -77,8 +78,8 @@ class Job:
 
 @dataclass
 class Sweep:
-    """An experiment's sweep as Hydra's basic sweeper expands it (one job composed per model, level and budget): how
-    many jobs of each kind."""
+    """An experiment's sweep as Hydra's basic sweeper expands it (one job composed per distinct set of overrides
+    other than seed and shape): how many jobs of each kind."""
 
     jobs: dict[Job, int]
 
@@ -109,7 +110,7 @@ def expand(entry: Entry) -> Sweep:
         for batch in BasicSweeper.split_arguments(parsed, None):
             for overrides in batch:
                 what = tuple(o for o in overrides if o.split("=", 1)[0].lstrip("+") not in ("seed", "shape"))
-                if what not in budgets:  # compose one job per model, level and budget: what its cost depends on
+                if what not in budgets:  # seed and shape change no budget: compose one job per other overrides
                     budgets[what] = _budget(loader.load_sweep_config(master, list(overrides)))
                 job = Job(*budgets[what])
                 jobs[job] = jobs.get(job, 0) + 1
@@ -117,15 +118,18 @@ def expand(entry: Entry) -> Sweep:
 
 
 def _budget(cfg: Any) -> tuple[str, str, str, float, float]:
-    """(model, level, budget, max_seconds, work) of one job's composed config (hydra node included)."""
+    """(model, level, budget, max_seconds, work) of one job's composed config (hydra node included), with the level
+    it asks for applied (plugins.job_config: a level may set train.max_steps), as the job itself sees it."""
     from hydra.core.hydra_config import HydraConfig
 
     HydraConfig.instance().set_config(cfg)  # as the job itself resolves its interpolations
-    choices = cfg.hydra.runtime.choices
-    train = cfg.get("train") or {}
+    choices = dict(cfg.hydra.runtime.choices)
+    level = next((o.split("=", 1)[1] for o in cfg.hydra.overrides.task if o.lstrip("+").startswith("capacity=")), "")
+    with open_dict(cfg):
+        del cfg["hydra"]
+    train = plugins.job_config(OmegaConf.to_container(cfg, resolve=True), choices).get("train") or {}
     budget = str(train.get("budget", "steps"))
     work = {"steps": train.get("max_steps"), "epochs": train.get("max_epochs")}.get(budget)
-    level = next((o.split("=", 1)[1] for o in cfg.hydra.overrides.task if o.lstrip("+").startswith("capacity=")), "")
     return (str(choices.get("model", "?")), level, budget, float(train.get("max_seconds") or 0.0), float(work or 0.0))
 
 
@@ -143,7 +147,7 @@ def _seconds(rec: dict[str, Any]) -> float | None:
 
 def _level(rec: dict[str, Any]) -> str:
     """The capacity level a record's command line set ("" when none)."""
-    return next((o.split("=", 1)[1] for o in rec.get("overrides") or [] if o.startswith("capacity=")), "")
+    return next((o.split("=", 1)[1] for o in rec.get("overrides") or [] if o.lstrip("+").startswith("capacity=")), "")
 
 
 def committed_records(reports: str) -> dict[str, list[dict[str, Any]]]:
@@ -245,13 +249,22 @@ def run(suite: str, tier: str, results: str, extra: list[str] | None = None, fro
     committed records into results/ (compact.restore), so that a tier cut short on another machine goes on where
     its committed records end (the report refuses records of two code commits: run it from the records' commit).
     only: the tier's experiments to run (default: all)."""
+    entries = tier_entries(suite, tier, only)
+    committed = {e.report: os.path.join(ROOT, e.report, compact.FILE) for e in entries}
+    if from_reports:
+        here = runs.code_sha()
+        for report, path in committed.items():
+            shas = runs.code_commits(compact.read_compact(path)) if os.path.isfile(path) else []
+            if shas and shas != [here]:
+                raise InputError(f"--from-reports: {report}'s records are of code {', '.join(s[:7] for s in shas)}, "
+                                 f"this checkout's code is {str(here)[:7]}: run from a worktree at their commit (a "
+                                 "report refuses records of two commits)")
     rc = 0
-    for entry in tier_entries(suite, tier, only):
-        committed = os.path.join(ROOT, entry.report, compact.FILE)
-        if from_reports and os.path.isfile(committed):
-            written, kept = compact.restore(committed, results)
+    for entry in entries:
+        if from_reports and os.path.isfile(committed[entry.report]):
+            written, kept, left = compact.restore(committed[entry.report], results)
             print(f"{entry.experiment}: restored {written} committed records from {entry.report} ({kept} already "
-                  "in results)", flush=True)
+                  f"in results, {left} left out to run again)", flush=True)
         cmd = [sys.executable, "-m", "ddfbench", f"+experiment={entry.experiment}", f"out_dir={results}", "quiet=true",
                *entry.overrides, *(extra or [])]
         print("$", " ".join(cmd[1:]), flush=True)
