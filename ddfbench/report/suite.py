@@ -78,8 +78,8 @@ class Job:
 
 @dataclass
 class Sweep:
-    """An experiment's sweep as Hydra's basic sweeper expands it (one job composed per distinct set of overrides
-    other than seed and shape): how many jobs of each kind."""
+    """An experiment's sweep as Hydra's basic sweeper expands it (one job composed per model, level and train
+    overrides): how many jobs of each kind."""
 
     jobs: dict[Job, int]
 
@@ -109,12 +109,18 @@ def expand(entry: Entry) -> Sweep:
         budgets: dict[tuple[str, ...], tuple[str, str, str, float, float]] = {}
         for batch in BasicSweeper.split_arguments(parsed, None):
             for overrides in batch:
-                what = tuple(o for o in overrides if o.split("=", 1)[0].lstrip("+") not in ("seed", "shape"))
-                if what not in budgets:  # seed and shape change no budget: compose one job per other overrides
+                what = tuple(o for o in overrides if _sets_budget(o.split("=", 1)[0].lstrip("+")))
+                if what not in budgets:  # compose one job per model, level and train overrides
                     budgets[what] = _budget(loader.load_sweep_config(master, list(overrides)))
                 job = Job(*budgets[what])
                 jobs[job] = jobs.get(job, 0) + 1
         return Sweep(jobs)
+
+
+def _sets_budget(key: str) -> bool:
+    """Whether an override of key can change a job's fit budget: the model, its level, a train key (no sampler level
+    or scene sets one; a level is a partial config of the job, plugins.job_config)."""
+    return key in ("model", "capacity") or key.startswith("train.")
 
 
 def _budget(cfg: Any) -> tuple[str, str, str, float, float]:
