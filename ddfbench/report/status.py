@@ -98,7 +98,6 @@ def expected_grid(records_dir: str, overrides: list[str]) -> tuple[list[Job], st
     from hydra import initialize_config_dir
     from hydra._internal.core_plugins.basic_sweeper import BasicSweeper
     from hydra.core.global_hydra import GlobalHydra
-    from hydra.core.hydra_config import HydraConfig
     from hydra.core.override_parser.overrides_parser import OverridesParser
 
     with initialize_config_dir(CONF_DIR, version_base="1.3", job_name="ddfbench_status"):
@@ -112,15 +111,22 @@ def expected_grid(records_dir: str, overrides: list[str]) -> tuple[list[Job], st
         jobs = []
         for batch in BasicSweeper.split_arguments(parsed, None):
             for job_overrides in batch:
-                cfg = loader.load_sweep_config(master, list(job_overrides))
-                HydraConfig.instance().set_config(cfg)  # as the job itself sees it
-                choices = dict(cfg.hydra.runtime.choices)
-                with open_dict(cfg):
-                    del cfg["hydra"]
-                plain = OmegaConf.to_container(cfg, resolve=True)
-                key = runs.config_key(plugins.job_config(plain, choices))  # type: ignore[arg-type]
+                key = runs.config_key(compose_job(loader, master, list(job_overrides))[0])
                 jobs.append(Job([o for o in job_overrides if o.split("=", 1)[0] in swept], key))
     return jobs, source
+
+
+def compose_job(loader: Any, master: DictConfig, overrides: list[str]) -> tuple[dict[str, Any], dict[str, str]]:
+    """One job of a sweep as the job itself sees it: (its resolved config with its levels applied,
+    plugins.job_config, what its record key is taken from; Hydra's config-group choices)."""
+    from hydra.core.hydra_config import HydraConfig
+
+    cfg = loader.load_sweep_config(master, overrides)
+    HydraConfig.instance().set_config(cfg)  # as the job itself resolves its interpolations
+    choices = dict(cfg.hydra.runtime.choices)
+    with open_dict(cfg):
+        del cfg["hydra"]
+    return plugins.job_config(OmegaConf.to_container(cfg, resolve=True), choices), choices  # type: ignore[arg-type]
 
 
 def sweep_status(records_dir: str, overrides: list[str] | None = None) -> SweepStatus:

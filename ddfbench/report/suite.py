@@ -22,12 +22,13 @@ import sys
 from dataclasses import dataclass, field
 from typing import Any
 
-from omegaconf import OmegaConf, open_dict
+from omegaconf import OmegaConf
 
 from ddfbench.core import plugins
 from ddfbench.core.errors import InputError
 from ddfbench.core.plugins import CONF_DIR
 from ddfbench.report import compact
+from ddfbench.report.status import compose_job
 from ddfbench.run import runs
 
 ROOT = os.path.dirname(CONF_DIR)
@@ -111,7 +112,7 @@ def expand(entry: Entry) -> Sweep:
             for overrides in batch:
                 what = tuple(o for o in overrides if _sets_budget(o.split("=", 1)[0].lstrip("+")))
                 if what not in budgets:  # compose one job per model, level and train overrides
-                    budgets[what] = _budget(loader.load_sweep_config(master, list(overrides)))
+                    budgets[what] = _budget(*compose_job(loader, master, list(overrides)), list(overrides))
                 job = Job(*budgets[what])
                 jobs[job] = jobs.get(job, 0) + 1
         return Sweep(jobs)
@@ -123,20 +124,14 @@ def _sets_budget(key: str) -> bool:
     return key in ("model", "capacity") or key.startswith("train.")
 
 
-def _budget(cfg: Any) -> tuple[str, str, str, float, float]:
-    """(model, level, budget, max_seconds, work) of one job's composed config (hydra node included), with the level
-    it asks for applied (plugins.job_config: a level may set train.max_steps), as the job itself sees it."""
-    from hydra.core.hydra_config import HydraConfig
-
-    HydraConfig.instance().set_config(cfg)  # as the job itself resolves its interpolations
-    choices = dict(cfg.hydra.runtime.choices)
-    level = next((o.split("=", 1)[1] for o in cfg.hydra.overrides.task if o.lstrip("+").startswith("capacity=")), "")
-    with open_dict(cfg):
-        del cfg["hydra"]
-    train = plugins.job_config(OmegaConf.to_container(cfg, resolve=True), choices).get("train") or {}
+def _budget(job: dict[str, Any], choices: dict[str, str], overrides: list[str]) -> tuple[str, str, str, float, float]:
+    """(model, level, budget, max_seconds, work) of one job's config with its level applied (status.compose_job: a
+    level may set train.max_steps) and its overrides."""
+    train = job.get("train") or {}
     budget = str(train.get("budget", "steps"))
     work = {"steps": train.get("max_steps"), "epochs": train.get("max_epochs")}.get(budget)
-    return (str(choices.get("model", "?")), level, budget, float(train.get("max_seconds") or 0.0), float(work or 0.0))
+    return (str(choices.get("model", "?")), _capacity(overrides), budget, float(train.get("max_seconds") or 0.0),
+            float(work or 0.0))
 
 
 def jobs_per_model(entry: Entry) -> dict[str, int]:
@@ -151,9 +146,14 @@ def _seconds(rec: dict[str, Any]) -> float | None:
         return None
 
 
+def _capacity(overrides: list[str]) -> str:
+    """The capacity level a command line sets ("" when none)."""
+    return next((o.split("=", 1)[1] for o in overrides if o.lstrip("+").startswith("capacity=")), "")
+
+
 def _level(rec: dict[str, Any]) -> str:
     """The capacity level a record's command line set ("" when none)."""
-    return next((o.split("=", 1)[1] for o in rec.get("overrides") or [] if o.lstrip("+").startswith("capacity=")), "")
+    return _capacity(rec.get("overrides") or [])
 
 
 def committed_records(reports: str) -> dict[str, list[dict[str, Any]]]:
