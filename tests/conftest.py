@@ -31,6 +31,15 @@ def random_rays(rng, n, half=0.6):
     return o, d / np.linalg.norm(d, axis=1, keepdims=True)
 
 
+def rebuilt_differences(folder, into):
+    """The text files of a re-measurement folder that its rebuild from the measured rows saved there (into `into`)
+    writes otherwise, byte for byte; [] when every one comes back the same."""
+    from ddfbench.report import measured, regenerate
+
+    measured.rebuild(str(folder), str(into))
+    return regenerate.differences(str(folder), str(into))
+
+
 def pytest_collection_modifyitems(session, config, items):
     """Files with the most slow-marked tests first, each file's tests in their own order: pytest-xdist's
     --dist loadfile hands whole files to whichever worker is free, so the longest files starting first keeps one

@@ -17,6 +17,7 @@ import pytest
 
 from ddfbench.report.edge_error import BANDS, band_counts, bands, edge_pixels, figures, main
 from ddfbench.run.runs import find_records
+from tests.conftest import rebuilt_differences
 
 BAND = {name: i for i, (name, _) in enumerate(BANDS)}
 
@@ -114,6 +115,7 @@ def test_a_real_runs_pooled_figures_are_its_records_image_metrics_and_a_run_with
     assert row["mask_iou"] == pytest.approx(rec["metrics"]["mask_iou"], rel=1e-9)
     assert table["pixels"].sum() > 0 and 0 < row["pixels_near"] < 1
     assert "1 runs' saved renders (1 unreadable)" in (tmp_path / "edges" / "table.md").read_text()
+    assert rebuilt_differences(tmp_path / "edges", tmp_path / "edges_again") == []  # from its measured rows alone
 
 
 def test_a_bad_jump_and_a_folder_without_records_are_one_line_errors(tmp_path, capsys):

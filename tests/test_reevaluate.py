@@ -13,6 +13,7 @@ import pytest
 
 from ddfbench.report.reevaluate import main
 from ddfbench.run.runs import find_records
+from tests.conftest import rebuilt_differences
 
 RUN = ["-m", "model=grid_sdf,neural_sdf", "shape=sphere", "eval=smoke", "eval.n_points=2000",
        "eval.mesh_resolution=20", "scene=depth", "scene.width=24", "scene.height=24", "sampling=random",
@@ -53,6 +54,7 @@ def test_reevaluation_at_the_records_settings_reproduces_them(tmp_path, capsys):
     code = recs["grid_sdf", 0]["env"]["code_sha"]
     assert code and f"records of code {code[:7]}, measured by code {code[:7]}." in (tmp_path / "re" / "table.md").read_text()
     assert set(table.loc[table["n"] == 2, "model"]) == {"grid_sdf", "neural_sdf"}
+    assert rebuilt_differences(tmp_path / "re", tmp_path / "re_again") == []  # from its measured rows alone
     # another point count is another measurement, and without a scene there are no image metrics
     assert main([str(tmp_path / "single"), "--out", str(tmp_path / "re5"), "--n-points", "500"]) == 0
     other = pd.read_csv(tmp_path / "re5" / "runs.csv").set_index("key")
@@ -100,6 +102,9 @@ def test_a_float16_run_measures_its_rounded_network_as_store_as_float16_measures
     pairs = (tmp_path / "re" / "paired.md").read_text()  # each run against its own saved mesh: 2 pairs
     rows = [line.split(" | ") for line in pairs.splitlines() if line.startswith("| stored as float16 |")]
     assert len(rows) == 2 and all(row[1] == "2" for row in rows)  # chamfer and F@0.01, 2 pairs each
+    # every table, paired.md too, regenerates byte for byte from the measured rows saved beside it
+    assert rebuilt_differences(tmp_path / "re", tmp_path / "re_again") == []
+    assert {p.name for p in (tmp_path / "re_again").iterdir()} >= {"table.md", "table.csv", "runs.csv", "paired.md"}
     capsys.readouterr()  # a float16 record cannot be stored as float32: its rounding stays
     assert main([str(tmp_path / "single"), "--out", str(tmp_path / "w"), "--model", "ddf", "--store-as", "float32"]) == 1
     err = [line for line in capsys.readouterr().err.splitlines() if line.startswith("ddfbench.report.reevaluate")]

@@ -9,7 +9,7 @@ import shutil
 import pytest
 
 from ddfbench.evaluate.metric_registry import by_name
-from ddfbench.report import compact, site
+from ddfbench.report import compact, measured, site
 from ddfbench.report.records import no_result
 
 WebDriverWait = pytest.importorskip("selenium.webdriver.support.wait").WebDriverWait
@@ -119,8 +119,11 @@ def test_each_report_page_names_its_commit_and_the_index_marks_those_without_rec
     assert f"runs of code {code}; it regenerates from its committed records" in page
     front = (out / "index.html").read_text()
     folders = site.table_folders(os.path.join(ROOT, "reports"))
-    without = [rel for rel in folders if not os.path.isfile(os.path.join(ROOT, "reports", rel, compact.FILE))]
+    without = [rel for rel in folders if not any(os.path.isfile(os.path.join(ROOT, "reports", rel, name))
+                                                 for name in (compact.FILE, measured.FILE))]
     assert without and len(without) < len(folders) == got["pages"]
+    remeasured = (out / "report-pareto-edge_error.html").read_text()  # a re-measurement with its measured rows
+    assert "a re-measurement of the runs' artifacts; it regenerates from the rows it measured" in remeasured
     for rel in folders:  # each link goes to its own folder's page, marked when that folder has no records
         link = f"<a href='report-{rel.replace(os.sep, '-')}.html'>{rel}</a>"
         assert (f"{link} (not regenerable from records)" in front) == (rel in without) and link in front, rel

@@ -16,6 +16,7 @@ import torch
 from ddfbench.models.gan_sdf import GanSDF
 from ddfbench.report.zero_level import main, offsets, value_and_slope
 from ddfbench.run.runs import find_records
+from tests.conftest import rebuilt_differences
 
 RUN = ["shape=sphere", "eval=smoke", "eval.n_points=2000", "eval.mesh_resolution=24", "sampling=random",
        "sampling.n_samples=2000", "train.budget=steps", "train.max_steps=1", "threads=1", "quiet=true", "seed=3"]
@@ -39,6 +40,7 @@ def test_zero_level_reads_a_shifted_grid_as_an_offset_and_extracting_at_its_leve
     table = pd.read_csv(tmp_path / "z0" / "table.csv")
     assert list(table["model"]) == ["grid_sdf"]  # the mesh run is left out, and said so
     assert "1 SDF runs (0 unreadable, 1 of other families left out)" in (tmp_path / "z0" / "table.md").read_text()
+    assert rebuilt_differences(tmp_path / "z0", tmp_path / "z0_again") == []  # from its measured rows alone
     before = table.iloc[0]
     assert abs(before["offset_p50"]) < 2e-3 and before["offset_p95"] - before["offset_p5"] < 0.01
     assert 0.9 < before["median_slope"] < 1.1 and before["slope_ok"] == 1  # a distance field

@@ -17,7 +17,8 @@ edges). Per band, summed over a run's cameras:
 - both: those both hit; abs_depth: the sum of |t − t_ref| over them (unit-cube units).
 
 DIR gets table.md (its first line: the command, the records' code commits, the measuring code's; one
-row per model, shape and capacity, mean ± std over seeds) and table.csv (one row per run and band).
+row per model, shape and capacity, mean ± std over seeds) and table.csv (one row per run and band), both
+written from the measured rows saved beside them (ddfbench.report.measured), from which they regenerate.
 The records are not changed. A run without depth and mask renders gets one line on stderr naming its
 folder; the others are still written (exit 1).
 """
@@ -35,8 +36,9 @@ import pandas as pd
 from scipy import ndimage
 
 from ddfbench.core.errors import InputError
+from ddfbench.report import measured
 from ddfbench.report.records import no_result
-from ddfbench.report.reevaluate import artifact, finished_records, measured_header, unreadable
+from ddfbench.report.reevaluate import artifact, finished_records, unreadable
 from ddfbench.report.stats import summarize_values, within_range
 from ddfbench.report.tables import NOT_CONVERGED
 
@@ -170,6 +172,17 @@ def to_markdown(runs: pd.DataFrame) -> str:
     return "\n".join(lines) + "\n"
 
 
+def write_tables(out: str, head: dict[str, str], rows: list[dict[str, Any]]) -> str:
+    """table.csv (the rows: one per run and band) and table.md (measured.first_line, then to_markdown) into out;
+    table.md's text."""
+    table = pd.DataFrame(rows)
+    table.to_csv(os.path.join(out, "table.csv"), index=False)
+    md = measured.first_line(head) + "\n\n" + to_markdown(table.drop_duplicates("key"))
+    with open(os.path.join(out, "table.md"), "w") as fh:
+        fh.write(md)
+    return md
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m ddfbench.report.edge_error",
                                  description="Where finished runs' depth and mask errors lie: at the picture's edges or across the surface.")
@@ -201,14 +214,9 @@ def main(argv: list[str] | None = None) -> int:
         print(f"ddfbench.report.edge_error: none of the {len(recs)} finished runs has readable renders; nothing written",
               file=sys.stderr)
         return 1
-    os.makedirs(args.out, exist_ok=True)
-    table = pd.DataFrame(rows)
-    table.to_csv(os.path.join(args.out, "table.csv"), index=False)
-    md = (measured_header("edge_error", argv, f"{len(used)} runs' saved renders ({failed} unreadable), edges at "
-                          f"depth steps > {args.jump:g}", used) + "\n\n"
-          + to_markdown(table.drop_duplicates("key")))
-    with open(os.path.join(args.out, "table.md"), "w") as fh:
-        fh.write(md)
+    head = measured.header("edge_error", argv, f"{len(used)} runs' saved renders ({failed} unreadable), edges at "
+                           f"depth steps > {args.jump:g}", used)
+    md = measured.write(args.out, head, rows)
     print(md, end="")
     return 1 if failed else 0
 

@@ -15,8 +15,10 @@ level, each run against itself (the saved mesh is the record's code's and device
 code of the mesh extraction). The records are not changed. DIR gets
 table.md (its first line: the command, the records' code commits and the measuring code's) /
 table.csv (report.tables: one row per configuration, seeds pooled, empty meshes at their
-penalty, the noise floor at this point count) and runs.csv (a row per run, with its swept values). A run whose artifacts
-cannot be read gets one line on stderr naming its folder; the others are still written (exit 1).
+penalty, the noise floor at this point count) and runs.csv (a row per run, with its swept values), all written
+from the records measured again, saved beside them (ddfbench.report.measured), from which they regenerate.
+A run whose artifacts cannot be read gets one line on stderr naming its folder; the others are still
+written (exit 1).
 """
 
 from __future__ import annotations
@@ -37,8 +39,8 @@ from ddfbench.core.geometry import BOX_HALF
 from ddfbench.core.representation import Representation
 from ddfbench.evaluate.metrics import geometry_metrics
 from ddfbench.models import load_family
-from ddfbench.report import paired, tables
-from ddfbench.run.runs import code_commits, code_sha, find_records
+from ddfbench.report import measured, paired, tables
+from ddfbench.run.runs import find_records
 
 RECORD_SCENE = "record"  # --scene record: each run's own scene as its record gives it
 
@@ -130,13 +132,6 @@ def unreadable(tool: str, rec: dict[str, Any], err: Exception) -> None:
     print(f"ddfbench.report.{tool}: {rec['_dir']}: {type(err).__name__}: {why}", file=sys.stderr, flush=True)
 
 
-def measured_header(tool: str, argv: list[str] | None, measured: str, records: list[dict[str, Any]]) -> str:
-    """A table's first line: the command, what was measured, the records' code commits and the measuring code's."""
-    command = f"`python -m ddfbench.report.{tool} {' '.join(argv if argv is not None else sys.argv[1:])}`"
-    return (f"{command}: {measured}, records of code {', '.join(c[:7] for c in code_commits(records))}, "
-            f"measured by code {(code_sha() or 'unknown')[:7]}.")
-
-
 def reevaluated(rec: dict[str, Any], n_points: int, scene: dict[str, Any] | str | None,
                 store_as: str | None = None) -> dict[str, Any]:
     """A copy of the record whose metrics are measured again: geometry at n_points (the record's radii,
@@ -185,6 +180,25 @@ def stored_as_pairs(saved: list[dict[str, Any]], stored: list[dict[str, Any]], d
     return "\n".join(parts)
 
 
+def write_tables(out: str, head: dict[str, str], rows: list[dict[str, Any]]) -> str:
+    """table.md, table.csv and runs.csv of the records measured again (rows); with records stored at another dtype
+    (their `_stored_as`), those are the tables' and the others, each run as saved, are paired.md's pairs. Into out;
+    table.md's text."""
+    stored = [r for r in rows if r.get("_stored_as")]
+    done, saved = (stored, [r for r in rows if not r.get("_stored_as")]) if stored else (rows, [])
+    df = tables.summarize(done)
+    md = measured.first_line(head) + "\n\n" + tables.to_markdown(df)
+    with open(os.path.join(out, "table.md"), "w") as fh:
+        fh.write(md)
+    tables.to_csv(df, os.path.join(out, "table.csv"))
+    tables.per_run(done).to_csv(os.path.join(out, "runs.csv"), index=False)
+    if stored:
+        with open(os.path.join(out, "paired.md"), "w") as fh:
+            fh.write(measured.first_line(head, "paired") + "\n\n"
+                     + stored_as_pairs(saved, done, str(stored[0]["_stored_as"])))
+    return md
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = records_parser("reevaluate", "A finished sweep measured again from its saved artifacts.",
                         "table.md, table.csv and runs.csv", 100_000)
@@ -204,9 +218,9 @@ def main(argv: list[str] | None = None) -> int:
     done, saved, failed = [], [], 0
     for i, rec in enumerate(sorted(recs, key=lambda r: (r["model"], r["shape"]["name"], r["key"]))):
         try:
-            measured = reevaluated(rec, args.n_points, scene, args.store_as)
+            again = reevaluated(rec, args.n_points, scene, args.store_as)
             pair = reevaluated(rec, args.n_points, None) if args.store_as else None  # the saved mesh, same points
-            done.append(measured)
+            done.append(again)
             if pair is not None:
                 saved.append(pair)
         except (InputError, OSError, KeyError, ValueError) as err:
@@ -216,19 +230,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"[{i + 1}/{len(recs)}] {rec['model']} {rec['shape']['name']} seed {rec['config'].get('seed')}: "
               f"CD-L2 {done[-1]['metrics']['chamfer_l2']:.4g}", file=sys.stderr, flush=True)
     if done:
-        os.makedirs(args.out, exist_ok=True)
-        df = tables.summarize(done)
-        md = (measured_header("reevaluate", argv, f"{len(done)} runs measured again ({failed} unreadable)", done)
-              + "\n\n" + tables.to_markdown(df))
-        with open(os.path.join(args.out, "table.md"), "w") as fh:
-            fh.write(md)
-        tables.to_csv(df, os.path.join(args.out, "table.csv"))
-        tables.per_run(done).to_csv(os.path.join(args.out, "runs.csv"), index=False)
-        if args.store_as:
-            with open(os.path.join(args.out, "paired.md"), "w") as fh:
-                fh.write(measured_header("reevaluate", argv, "paired", done) + "\n\n"
-                         + stored_as_pairs(saved, done, args.store_as))
-        print(md, end="")
+        head = measured.header("reevaluate", argv, f"{len(done)} runs measured again ({failed} unreadable)", done)
+        print(measured.write(args.out, head, done + saved), end="")
     return 1 if failed else 0
 
 

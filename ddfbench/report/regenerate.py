@@ -2,11 +2,13 @@
 `python -m ddfbench.report.regenerate --from-records [--reports DIR] [--check]`
 
 --from-records rebuilds every report below --reports that holds its compact records (records.jsonl.gz) from
-those alone (and <reports>/claims.md from them, ddfbench.report.claims; <reports>/index.md, every report folder with its
-commit and whether it has records, ddfbench.report.index; and the verdict table, reports/verdict.md and the README's block, ddfbench.report.verdict), running no fit, with the options it was written with (report_options.json); --check writes into a
-scratch folder instead and exits 1 naming each committed file that differs, byte for byte, from its rebuild
-(text files: .md, .csv, .tex; the images are not drawn, those committed are linked; sweep_status.md is
-the state of the machine that ran the sweep). CI runs --check.
+those alone, with the options it was written with (report_options.json), and every re-measurement's tables from
+its measured rows (measured.jsonl.gz, ddfbench.report.measured); then <reports>/claims.md from the records
+(ddfbench.report.claims), <reports>/index.md (every report folder with its commit and whether it regenerates,
+ddfbench.report.index) and the verdict table (reports/verdict.md and the README's block, ddfbench.report.verdict),
+running no fit and measuring nothing. --check writes into a scratch folder instead and exits 1 naming each committed
+file that differs, byte for byte, from its rebuild (text files: .md, .csv, .tex; the images are not drawn, those
+committed are linked; sweep_status.md is the state of the machine that ran the sweep). CI runs --check.
 
 Without --from-records:
 
@@ -37,7 +39,7 @@ import time
 
 from ddfbench.core import plugins
 from ddfbench.fit import tune
-from ddfbench.report import compact, index, shape_suite, verdict
+from ddfbench.report import compact, index, measured, shape_suite, verdict
 from ddfbench.report import tune as tune_report
 from ddfbench.report.__main__ import OPTIONS_FILE, STATUS_FILE, MixedCommits, write_report
 from ddfbench.report.claims import write_claims, write_committed_claims
@@ -119,20 +121,22 @@ def from_records(reports: str, check: bool, readme: str | None = None) -> int:
     """--from-records: rebuild (or, with check, compare) every report below reports that has its records, and the
     verdict table (reports/verdict.md and the block of `readme`, when it has the markers)."""
     folders = reports_with_records(reports)
-    if not folders:
-        print(f"ddfbench.report.regenerate: no {compact.FILE} below {reports}", file=sys.stderr)
+    remeasured = measured.folders(reports)
+    if not folders and not remeasured:
+        print(f"ddfbench.report.regenerate: no {compact.FILE} or {measured.FILE} below {reports}", file=sys.stderr)
         return 2
     differing = []
-    for folder in folders:
+    for folder in folders + remeasured:
+        remake = measured.rebuild if folder in remeasured else lambda src, into: rebuild(src, into, draw=not check)
         if not check:
-            rebuild(folder, folder)
+            remake(folder, folder)
             print(f"rebuilt {folder}", flush=True)
             continue
         with tempfile.TemporaryDirectory() as scratch:
             # kept, not compared: the images; an input: the suite's measured tags (read, not rewritten)
             for name in (f for f in os.listdir(folder) if f.endswith((".png", ".pdf")) or f == shape_suite.TAGS_FILE):
                 shutil.copy2(os.path.join(folder, name), scratch)
-            rebuild(folder, scratch, draw=False)
+            remake(folder, scratch)
             differing += [os.path.join(folder, name) for name in differences(folder, scratch)]
     generated = {"claims.md": lambda path: write_committed_claims(reports, path),  # the files made from all reports
                  index.FILE: lambda path: index.write_index(reports, path)}
@@ -147,9 +151,10 @@ def from_records(reports: str, check: bool, readme: str | None = None) -> int:
                 if not filecmp.cmp(path, os.path.join(scratch, name), shallow=False):
                     differing.append(path)
     for path in differing:
-        print(f"ddfbench.report.regenerate: {path} differs from its rebuild from {compact.FILE}", file=sys.stderr)
+        print(f"ddfbench.report.regenerate: {path} differs from its rebuild from its records", file=sys.stderr)
     if check:
-        print(f"checked {len(folders)} report(s) with records: {len(differing)} file(s) differ", flush=True)
+        print(f"checked {len(folders)} report(s) with records and {len(remeasured)} re-measurement(s) with their "
+              f"measured rows: {len(differing)} file(s) differ", flush=True)
     code = 1 if differing else 0
     if readme and os.path.isfile(readme) and verdict.START in open(readme).read():  # the README's generated block
         code = max(code, verdict.main(["--reports", reports, "--readme", readme, *(["--check"] if check else [])]))

@@ -166,6 +166,7 @@ def _slug(rel: str) -> str:
 def provenance_line(found: index.Provenance) -> str:
     """A report folder's runs, code commit(s) and whether it regenerates from committed records, in words."""
     where = {index.REGENERATES: "it regenerates from its committed records",
+             index.FROM_ROWS: "a re-measurement of the runs' artifacts; it regenerates from the rows it measured",
              index.ARTIFACTS: "a re-measurement of the runs' artifacts, which stay with the runs"}.get(
         found.regenerates, "its records are not committed, so its table cannot be recomputed from the repository")
     return (f"{found.runs if found.runs is not None else 'an unknown number of'} runs of code "
@@ -219,7 +220,7 @@ def write_site(reports: str, out: str) -> dict[str, int]:
     galleries = write_gallery(reports, out)
     pages = write_reports(reports, out)
     links = "".join(f"<li><a href='{slug}.html'>{html.escape(rel)}</a>"
-                    f"{'' if found.regenerates == index.REGENERATES else ' (not regenerable from records)'}</li>"
+                    f"{'' if found.regenerates in index.REGENERABLE else ' (not regenerable from records)'}</li>"
                     for slug, rel, found in pages)
     body = ("<p>ddfbench: which shape representation, at what cost. <a href='pareto.html'>Accuracy against cost</a>, "
             "<a href='claims.html'>the papers' claims</a>, <a href='gallery.html'>galleries</a>, and every report:</p>"

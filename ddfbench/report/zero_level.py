@@ -20,7 +20,8 @@ spread about it? For every ok run of a family answering rays by sphere tracing a
   could give, it is not a result of the method.
 
 DIR gets table.md (its first line: the command, the records' code commits, the measuring code's) and
-table.csv, one row per run. The records are not changed. Runs of other families are counted and left
+table.csv, one row per run, both written from the measured rows saved beside them (ddfbench.report.measured),
+from which they regenerate. The records are not changed. Runs of other families are counted and left
 out; a run whose artifacts cannot be read gets one line on stderr naming its folder, and the others
 are still written (exit 1).
 """
@@ -41,11 +42,11 @@ from ddfbench.core.errors import InputError
 from ddfbench.evaluate.metrics import geometry_metrics, sample_surface
 from ddfbench.models import load_family
 from ddfbench.models._sdf_family import SDFFamily
+from ddfbench.report import measured
 from ddfbench.report.reevaluate import (
     artifact,
     checked_counts,
     finished_records,
-    measured_header,
     records_parser,
     saved_model,
     unreadable,
@@ -131,6 +132,16 @@ def to_markdown(rows: list[dict[str, Any]]) -> str:
     return "\n".join(lines) + "\n"
 
 
+def write_tables(out: str, head: dict[str, str], rows: list[dict[str, Any]]) -> str:
+    """table.md (measured.first_line, then to_markdown) and table.csv (the rows, one per run) into out; table.md's
+    text."""
+    md = measured.first_line(head) + "\n\n" + to_markdown(rows)
+    with open(os.path.join(out, "table.md"), "w") as fh:
+        fh.write(md)
+    pd.DataFrame(rows).to_csv(os.path.join(out, "table.csv"), index=False)
+    return md
+
+
 def _table_order(rec: dict[str, Any]) -> tuple:
     cfg = rec["config"]
     return rec["model"], rec["shape"]["name"], str(cfg.get("capacity") or ""), int(cfg.get("seed", 0)), rec["key"]
@@ -157,15 +168,11 @@ def main(argv: list[str] | None = None) -> int:
             failed += 1
             unreadable("zero_level", rec, err)
     if rows:
-        os.makedirs(args.out, exist_ok=True)
         used = [r for r in sdf_recs if r["key"] in {row["key"] for row in rows}]
         other = len(recs) - len(sdf_recs)
-        md = (measured_header("zero_level", argv, f"{len(rows)} SDF runs ({failed} unreadable, {other} of other "
-                              "families left out)", used) + "\n\n" + to_markdown(rows))
-        with open(os.path.join(args.out, "table.md"), "w") as fh:
-            fh.write(md)
-        pd.DataFrame(rows).to_csv(os.path.join(args.out, "table.csv"), index=False)
-        print(md, end="")
+        head = measured.header("zero_level", argv, f"{len(rows)} SDF runs ({failed} unreadable, {other} of other "
+                               "families left out)", used)
+        print(measured.write(args.out, head, rows), end="")
     return 1 if failed else 0
 
 

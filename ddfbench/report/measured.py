@@ -1,0 +1,81 @@
+"""A re-measurement's rows travel with its tables, so its folder regenerates from the repository like a report.
+
+The tools that measure finished runs again from their artifacts (ddfbench.report.reevaluate, zero_level,
+edge_error: meshes, networks and renders, which stay with the runs) write, beside their tables:
+
+- `measured.jsonl.gz`: every row the tool measured, in its order, one JSON object a line (zero_level: a row per
+  run; edge_error: a row per run and band; reevaluate: each run record with its metrics measured again, the out_dir
+  override written as `<out_dir>` as in compact records); deterministic (gzip's timestamp 0), NaN kept;
+- `measured.json`: {"tool", "command", "what", "provenance"}, the parts of the tables' first line
+  (`command`: what, records of code …, measured by code ….).
+
+The tool writes its text files (table.md, table.csv, runs.csv, paired.md) from these two files as they read back, so
+`rebuild` (`regenerate --from-records`) writes the same bytes again on a fresh clone, measuring nothing; a tool's
+tables are `write_tables(out, header, rows) -> table.md's text` of its module.
+"""
+
+from __future__ import annotations
+
+import gzip
+import importlib
+import json
+import os
+import sys
+from typing import Any
+
+from ddfbench.core.errors import InputError
+from ddfbench.report.compact import portable
+from ddfbench.run.runs import code_commits, code_sha
+
+FILE = "measured.jsonl.gz"
+META = "measured.json"
+TOOLS = ("reevaluate", "zero_level", "edge_error")  # modules of ddfbench.report with write_tables
+
+
+def header(tool: str, argv: list[str] | None, what: str, records: list[dict[str, Any]]) -> dict[str, str]:
+    """The parts of a table's first line: the command, what was measured, the records' code commits and the
+    measuring code's."""
+    return {"tool": tool,
+            "command": f"`python -m ddfbench.report.{tool} {' '.join(argv if argv is not None else sys.argv[1:])}`",
+            "what": what,
+            "provenance": f"records of code {', '.join(c[:7] for c in code_commits(records))}, "
+                          f"measured by code {(code_sha() or 'unknown')[:7]}"}
+
+
+def first_line(head: dict[str, str], what: str | None = None) -> str:
+    """A table's first line from header's parts (`what` in place of the header's own, e.g. for a second table)."""
+    return f"{head['command']}: {what or head['what']}, {head['provenance']}."
+
+
+def write(out: str, head: dict[str, str], rows: list[dict[str, Any]]) -> str:
+    """Write the rows and the header into `out`, then the tool's tables from them as read back; table.md's text."""
+    os.makedirs(out, exist_ok=True)
+    with open(os.path.join(out, FILE), "wb") as raw, gzip.GzipFile(filename="", mode="wb", fileobj=raw, mtime=0) as fh:
+        for row in rows:
+            fh.write((json.dumps(portable(row)) + "\n").encode())
+    with open(os.path.join(out, META), "w", encoding="utf-8") as fh:
+        json.dump(head, fh, indent=1, ensure_ascii=False)
+        fh.write("\n")
+    return rebuild(out, out)
+
+
+def read(folder: str) -> tuple[dict[str, str], list[dict[str, Any]]]:
+    """The header and rows a re-measurement folder holds."""
+    with open(os.path.join(folder, META), encoding="utf-8") as fh:
+        head = json.load(fh)
+    with gzip.open(os.path.join(folder, FILE), "rt", encoding="utf-8") as fh:
+        return head, [json.loads(line) for line in fh if line.strip()]
+
+
+def rebuild(folder: str, into: str) -> str:
+    """Write the tables of folder's measured rows into `into` with the tool that measured them; table.md's text."""
+    head, rows = read(folder)
+    if head.get("tool") not in TOOLS:
+        raise InputError(f"{os.path.join(folder, META)}: tool {head.get('tool')!r} is not one of {TOOLS}")
+    os.makedirs(into, exist_ok=True)
+    return importlib.import_module(f"ddfbench.report.{head['tool']}").write_tables(into, head, rows)
+
+
+def folders(reports: str) -> list[str]:
+    """Every folder below reports (any depth) that holds measured rows, sorted."""
+    return sorted(folder for folder, _, files in os.walk(reports) if FILE in files and META in files)

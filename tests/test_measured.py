@@ -1,0 +1,77 @@
+"""A re-measurement's tables regenerate from the rows it measured (ddfbench.report.measured): the rows come back as
+written (NaN and order kept), `regenerate --from-records --check` rebuilds the folder measuring nothing and catches a
+hand-edited table, the index counts it as regenerating, and a folder naming an unknown tool is a one-line error."""
+
+import gzip
+import json
+import math
+
+import pytest
+
+from ddfbench.core.errors import InputError
+from ddfbench.report import index, measured
+from ddfbench.report.edge_error import BANDS, COLUMNS
+from ddfbench.report.regenerate import main as regenerate_main
+from tests.conftest import rebuilt_differences
+
+HEAD = {"tool": "edge_error", "command": "`python -m ddfbench.report.edge_error <out_dir>/pareto --out x`",
+        "what": "2 runs' saved renders (0 unreadable), edges at depth steps > 0.1",
+        "provenance": "records of code abcdef0, measured by code 1234567"}
+
+
+def edge_rows():
+    """Two runs of one configuration, a row per band each, as edge_error measures them; run 1 has no far pixel."""
+    rows = []
+    for seed, value in ((0, 0.25), (1, 0.75)):
+        run = {"model": "ddf_tuned", "shape": "bunny", "capacity": "c2", "seed": seed, "key": f"{seed:016x}",
+               "no_result": False, **{key: value for key, _, _ in COLUMNS}}
+        if seed == 1:
+            run["depth_mae_far"] = math.nan
+        rows += [{**run, "band": name, "pixels": 10.0, "mask_errors": 1.0, "both": 9.0, "abs_depth": 0.5}
+                 for name, _ in BANDS]
+    return rows
+
+
+def test_the_rows_come_back_as_written_and_the_tables_are_written_from_them(tmp_path):
+    rows = edge_rows()
+    md = measured.write(str(tmp_path / "m"), HEAD, rows)
+    head, back = measured.read(str(tmp_path / "m"))
+    assert head == HEAD and [list(r) for r in back] == [list(r) for r in rows]  # the columns' order is kept
+    assert math.isnan(back[4]["depth_mae_far"]) and back[0]["depth_mae_far"] == 0.25 and back[0]["seed"] == 0
+    assert md == (tmp_path / "m" / "table.md").read_text()
+    assert md.startswith(f"{HEAD['command']}: {HEAD['what']}, {HEAD['provenance']}.\n\n| model |")
+    table = md.splitlines()[4]  # the pooled row: two runs, one defines the far figure
+    assert table.startswith("| ddf_tuned | bunny | c2 | 2 | 50 ± 35") and "(n = 1)" in table
+    assert rebuilt_differences(tmp_path / "m", tmp_path / "again") == []
+    with gzip.open(tmp_path / "m" / measured.FILE, "rb") as fh:  # deterministic: one set of rows, one file
+        first = fh.read()
+    measured.write(str(tmp_path / "m2"), HEAD, rows)
+    assert (tmp_path / "m" / measured.FILE).read_bytes() == (tmp_path / "m2" / measured.FILE).read_bytes()
+    assert first.count(b"\n") == len(rows)
+
+
+def test_regenerate_rebuilds_a_remeasurement_and_fails_on_a_hand_edited_table(tmp_path, capsys):
+    folder = tmp_path / "pareto" / "edge_error"
+    measured.write(str(folder), HEAD, edge_rows())
+    readme = str(tmp_path / "none.md")
+    assert regenerate_main(["--from-records", "--reports", str(tmp_path), "--readme", readme]) == 0
+    assert index.provenance(str(folder)) == index.Provenance(2, ["abcdef0"], index.FROM_ROWS)
+    text = (tmp_path / index.FILE).read_text()
+    assert "0 of 1 report folders regenerate from their committed records (`records.jsonl.gz`) and 1 re-measurements" \
+        in text and f"| {index.FROM_ROWS} |" in text
+    assert regenerate_main(["--from-records", "--check", "--reports", str(tmp_path), "--readme", readme]) == 0
+    assert "and 1 re-measurement(s) with their measured rows: 0 file(s) differ" in capsys.readouterr().out
+    md = folder / "table.md"
+    md.write_text(md.read_text().replace("| 2 | 50", "| 2 | 51"))
+    assert regenerate_main(["--from-records", "--check", "--reports", str(tmp_path), "--readme", readme]) == 1
+    err = capsys.readouterr().err.splitlines()
+    assert err == [f"ddfbench.report.regenerate: {md} differs from its rebuild from its records"]
+    assert regenerate_main(["--from-records", "--reports", str(tmp_path), "--readme", readme]) == 0
+    assert "| 2 | 50" in md.read_text()  # rebuilt in place from the rows
+
+
+def test_a_folder_naming_an_unknown_tool_is_a_one_line_error_naming_its_file(tmp_path):
+    measured.write(str(tmp_path), HEAD, edge_rows())
+    (tmp_path / measured.META).write_text(json.dumps({**HEAD, "tool": "os"}))
+    with pytest.raises(InputError, match=r"measured\.json: tool 'os' is not one of"):
+        measured.rebuild(str(tmp_path), str(tmp_path / "x"))
