@@ -5,6 +5,7 @@ hand-edited table, the index counts it as regenerating, and a folder naming an u
 import gzip
 import json
 import math
+import os
 
 import pytest
 
@@ -57,8 +58,9 @@ def test_regenerate_rebuilds_a_remeasurement_and_fails_on_a_hand_edited_table(tm
     assert regenerate_main(["--from-records", "--reports", str(tmp_path), "--readme", readme]) == 0
     assert index.provenance(str(folder)) == index.Provenance(2, ["abcdef0"], index.FROM_ROWS)
     text = (tmp_path / index.FILE).read_text()
-    assert "0 of 1 report folders regenerate from their committed records (`records.jsonl.gz`) and 1 re-measurements" \
-        in text and f"| {index.FROM_ROWS} |" in text
+    assert "1 of 1 report folders regenerate from committed files: 0 reports from their records" in text
+    assert "1 re-measurements of runs' artifacts (meshes, networks, renders) from the rows they measured" in text
+    assert f"| {index.FROM_ROWS} |" in text
     assert regenerate_main(["--from-records", "--check", "--reports", str(tmp_path), "--readme", readme]) == 0
     assert "and 1 re-measurement(s) with their measured rows: 0 file(s) differ" in capsys.readouterr().out
     md = folder / "table.md"
@@ -70,8 +72,50 @@ def test_regenerate_rebuilds_a_remeasurement_and_fails_on_a_hand_edited_table(tm
     assert "| 2 | 50" in md.read_text()  # rebuilt in place from the rows
 
 
-def test_a_folder_naming_an_unknown_tool_is_a_one_line_error_naming_its_file(tmp_path):
-    measured.write(str(tmp_path), HEAD, edge_rows())
-    (tmp_path / measured.META).write_text(json.dumps({**HEAD, "tool": "os"}))
-    with pytest.raises(InputError, match=r"measured\.json: tool 'os' is not one of"):
-        measured.rebuild(str(tmp_path), str(tmp_path / "x"))
+def test_a_stale_table_the_rebuild_does_not_write_is_a_difference(tmp_path, capsys):
+    folder = tmp_path / "r"
+    measured.write(str(folder), HEAD, edge_rows())
+    (folder / "paired.md").write_text("left by an earlier --store-as run into this folder\n")
+    readme = str(tmp_path / "none.md")
+    assert regenerate_main(["--from-records", "--check", "--reports", str(tmp_path), "--readme", readme]) == 1
+    assert capsys.readouterr().err.splitlines() == [
+        f"ddfbench.report.regenerate: {folder / 'paired.md'} differs from its rebuild from its records"]
+    assert rebuilt_differences(folder, tmp_path / "again") == ["paired.md"]
+
+
+@pytest.mark.parametrize("meta, rows, says", [
+    (json.dumps({**HEAD, "tool": "os"}), None, r"measured\.json: tool 'os' is not one of"),
+    (json.dumps({"tool": "zero_level"}), None, r"measured\.json: needs a JSON object with the strings tool, command"),
+    ("[]", None, r"measured\.json: needs a JSON object"),
+    ('{"tool": ', None, r"measured\.json: not a readable JSON file"),
+    (None, b"not gzip", r"measured\.jsonl\.gz: not measured rows"),
+    (None, gzip.compress(b'{"model": "a"}\n[1]\n'), r"measured\.jsonl\.gz: not measured rows \(line 2 is a JSON list"),
+])
+def test_a_bad_measured_file_is_one_line_naming_it_and_regenerate_exits_2(tmp_path, capsys, meta, rows, says):
+    folder = tmp_path / "r"
+    measured.write(str(folder), HEAD, edge_rows())
+    if meta is not None:
+        (folder / measured.META).write_text(meta)
+    if rows is not None:
+        (folder / measured.FILE).write_bytes(rows)
+    with pytest.raises(InputError, match=says):
+        measured.rebuild(str(folder), str(tmp_path / "x"))
+    capsys.readouterr()
+    assert regenerate_main(["--from-records", "--check", "--reports", str(tmp_path),
+                            "--readme", str(tmp_path / "none.md")]) == 2
+    (line,) = capsys.readouterr().err.splitlines()
+    assert line.startswith(f"ddfbench.report.regenerate: {folder}{os.sep}measured.json")
+
+
+def test_numpy_scalars_are_written_as_numbers_and_other_objects_refused_leaving_no_file(tmp_path):
+    import numpy as np
+
+    rows = [{**row, "pixels": np.float32(10.0), "seed": np.int64(row["seed"]), "no_result": np.bool_(False)}
+            for row in edge_rows()]
+    measured.write(str(tmp_path / "m"), HEAD, rows)
+    back = measured.read(str(tmp_path / "m"))[1]
+    assert json.dumps(back) == json.dumps([{**row, "pixels": 10.0} for row in edge_rows()])  # NaN != NaN: as text
+    assert type(back[0]["seed"]) is int and back[0]["no_result"] is False
+    with pytest.raises(TypeError, match="object is not a measured value"):
+        measured.write(str(tmp_path / "bad"), HEAD, [{**edge_rows()[0], "pixels": object()}])
+    assert not os.listdir(tmp_path / "bad")  # no half-written rows

@@ -22,7 +22,7 @@ import json
 import os
 import re
 import sys
-from typing import Any
+from typing import Any, Iterable
 
 from ddfbench.run.runs import RECORD_FILE, SCHEMA_VERSION, find_records, record_problem, write_json_atomic
 
@@ -40,14 +40,27 @@ def portable(rec: dict[str, Any]) -> dict[str, Any]:
     return row
 
 
+def write_jsonl_gz(lines: Iterable[str], path: str) -> str:
+    """Write the lines (JSON texts) to path, one a line, gzip'd with timestamp 0 (one content, one file), through a
+    temporary file renamed over path (a failure leaves no half-written file); return path."""
+    tmp = f"{path}.tmp"
+    try:
+        with open(tmp, "wb") as raw, gzip.GzipFile(filename="", mode="wb", fileobj=raw, mtime=0) as fh:
+            for line in lines:
+                fh.write((line + "\n").encode())
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+    return path
+
+
 def write_compact(records: list[dict[str, Any]], path: str) -> str:
     """Write the records (as find_records or read_compact give them) to path; return path."""
     rows = sorted((portable(r) for r in records),
                   key=lambda r: (str(r.get("experiment")), str(r.get("key"))))
-    with open(path, "wb") as raw, gzip.GzipFile(filename="", mode="wb", fileobj=raw, mtime=0) as fh:
-        for row in rows:
-            fh.write((json.dumps(row, sort_keys=True, allow_nan=False) + "\n").encode())
-    return path
+    return write_jsonl_gz((json.dumps(row, sort_keys=True, allow_nan=False) for row in rows), path)
 
 
 def read_compact(path: str) -> list[dict[str, Any]]:

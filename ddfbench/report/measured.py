@@ -5,7 +5,9 @@ edge_error: meshes, networks and renders, which stay with the runs) write, besid
 
 - `measured.jsonl.gz`: every row the tool measured, in its order, one JSON object a line (zero_level: a row per
   run; edge_error: a row per run and band; reevaluate: each run record with its metrics measured again, the out_dir
-  override written as `<out_dir>` as in compact records); deterministic (gzip's timestamp 0), NaN kept;
+  override written as `<out_dir>` as in compact records, and with --store-as each run as saved, measured alike,
+  the rows without `_stored_as`); deterministic (gzip's timestamp 0); NaN and infinities as Python's json writes
+  them (NaN, Infinity), numpy scalars as Python numbers;
 - `measured.json`: {"tool", "command", "what", "provenance"}, the parts of the tables' first line
   (`command`: what, records of code …, measured by code ….).
 
@@ -24,12 +26,13 @@ import sys
 from typing import Any
 
 from ddfbench.core.errors import InputError
-from ddfbench.report.compact import portable
+from ddfbench.report.compact import portable, write_jsonl_gz
 from ddfbench.run.runs import code_commits, code_sha
 
 FILE = "measured.jsonl.gz"
 META = "measured.json"
 TOOLS = ("reevaluate", "zero_level", "edge_error")  # modules of ddfbench.report with write_tables
+HEADER = ("tool", "command", "what", "provenance")
 
 
 def header(tool: str, argv: list[str] | None, what: str, records: list[dict[str, Any]]) -> dict[str, str]:
@@ -47,12 +50,17 @@ def first_line(head: dict[str, str], what: str | None = None) -> str:
     return f"{head['command']}: {what or head['what']}, {head['provenance']}."
 
 
+def _plain(value: Any) -> Any:
+    """A numpy scalar as its Python number (json's `default`); anything else is not a row's value."""
+    if hasattr(value, "item"):
+        return value.item()
+    raise TypeError(f"{type(value).__name__} is not a measured value")
+
+
 def write(out: str, head: dict[str, str], rows: list[dict[str, Any]]) -> str:
     """Write the rows and the header into `out`, then the tool's tables from them as read back; table.md's text."""
     os.makedirs(out, exist_ok=True)
-    with open(os.path.join(out, FILE), "wb") as raw, gzip.GzipFile(filename="", mode="wb", fileobj=raw, mtime=0) as fh:
-        for row in rows:
-            fh.write((json.dumps(portable(row)) + "\n").encode())
+    write_jsonl_gz((json.dumps(portable(row), default=_plain) for row in rows), os.path.join(out, FILE))
     with open(os.path.join(out, META), "w", encoding="utf-8") as fh:
         json.dump(head, fh, indent=1, ensure_ascii=False)
         fh.write("\n")
@@ -60,18 +68,33 @@ def write(out: str, head: dict[str, str], rows: list[dict[str, Any]]) -> str:
 
 
 def read(folder: str) -> tuple[dict[str, str], list[dict[str, Any]]]:
-    """The header and rows a re-measurement folder holds."""
-    with open(os.path.join(folder, META), encoding="utf-8") as fh:
-        head = json.load(fh)
-    with gzip.open(os.path.join(folder, FILE), "rt", encoding="utf-8") as fh:
-        return head, [json.loads(line) for line in fh if line.strip()]
+    """The header and rows a re-measurement folder holds; InputError naming the file (and line) that is not one."""
+    path = os.path.join(folder, META)
+    try:
+        with open(path, encoding="utf-8") as fh:
+            head = json.load(fh)
+    except (OSError, ValueError) as exc:
+        raise InputError(f"{path}: not a readable JSON file ({exc})") from exc
+    if not isinstance(head, dict) or any(not isinstance(head.get(key), str) for key in HEADER):
+        raise InputError(f"{path}: needs a JSON object with the strings {', '.join(HEADER)}")
+    if head["tool"] not in TOOLS:
+        raise InputError(f"{path}: tool {head['tool']!r} is not one of {TOOLS}")
+    path, rows = os.path.join(folder, FILE), []
+    try:
+        with gzip.open(path, "rt", encoding="utf-8") as fh:
+            for number, line in enumerate(fh, 1):
+                row = json.loads(line)
+                if not isinstance(row, dict):
+                    raise ValueError(f"line {number} is a JSON {type(row).__name__}, not an object")
+                rows.append(row)
+    except (OSError, EOFError, ValueError) as exc:
+        raise InputError(f"{path}: not measured rows ({exc})") from exc
+    return head, rows
 
 
 def rebuild(folder: str, into: str) -> str:
     """Write the tables of folder's measured rows into `into` with the tool that measured them; table.md's text."""
     head, rows = read(folder)
-    if head.get("tool") not in TOOLS:
-        raise InputError(f"{os.path.join(folder, META)}: tool {head.get('tool')!r} is not one of {TOOLS}")
     os.makedirs(into, exist_ok=True)
     return importlib.import_module(f"ddfbench.report.{head['tool']}").write_tables(into, head, rows)
 

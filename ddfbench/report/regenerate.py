@@ -38,6 +38,7 @@ import tempfile
 import time
 
 from ddfbench.core import plugins
+from ddfbench.core.errors import InputError
 from ddfbench.fit import tune
 from ddfbench.report import compact, index, measured, shape_suite, verdict
 from ddfbench.report import tune as tune_report
@@ -107,10 +108,13 @@ def rebuild(folder: str, into: str, draw: bool = True) -> None:
                  allow_mixed_commits=bool(options.get("allow_mixed_commits")), draw=draw)
 
 
-def differences(committed: str, rebuilt: str) -> list[str]:
+def differences(committed: str, rebuilt: str, whole: bool = False) -> list[str]:
     """The text files (COMPARED) the rebuild wrote that differ from the committed ones or are not committed, by
-    name (other files of the folder, such as a README.md or another tool's table, are not the report's)."""
+    name (other files of the folder, such as a README.md or another tool's table, are not the report's); whole: the
+    rebuild writes the whole folder (a re-measurement's), so a committed text file it did not write differs too."""
     names = {f for f in os.listdir(rebuilt) if f.endswith(COMPARED) and f != STATUS_FILE}
+    if whole:
+        names |= {f for f in os.listdir(committed) if f.endswith(COMPARED)}
     return sorted(n for n in names if not (os.path.isfile(os.path.join(committed, n))
                                            and os.path.isfile(os.path.join(rebuilt, n))
                                            and filecmp.cmp(os.path.join(committed, n), os.path.join(rebuilt, n),
@@ -121,23 +125,29 @@ def from_records(reports: str, check: bool, readme: str | None = None) -> int:
     """--from-records: rebuild (or, with check, compare) every report below reports that has its records, and the
     verdict table (reports/verdict.md and the block of `readme`, when it has the markers)."""
     folders = reports_with_records(reports)
-    remeasured = measured.folders(reports)
+    remeasured = [f for f in measured.folders(reports) if f not in folders]  # a report's records come first
     if not folders and not remeasured:
         print(f"ddfbench.report.regenerate: no {compact.FILE} or {measured.FILE} below {reports}", file=sys.stderr)
         return 2
-    differing = []
+    differing, unreadable = [], 0
     for folder in folders + remeasured:
-        remake = measured.rebuild if folder in remeasured else lambda src, into: rebuild(src, into, draw=not check)
-        if not check:
-            remake(folder, folder)
-            print(f"rebuilt {folder}", flush=True)
-            continue
-        with tempfile.TemporaryDirectory() as scratch:
-            # kept, not compared: the images; an input: the suite's measured tags (read, not rewritten)
-            for name in (f for f in os.listdir(folder) if f.endswith((".png", ".pdf")) or f == shape_suite.TAGS_FILE):
-                shutil.copy2(os.path.join(folder, name), scratch)
-            remake(folder, scratch)
-            differing += [os.path.join(folder, name) for name in differences(folder, scratch)]
+        rows = folder in remeasured
+        remake = measured.rebuild if rows else lambda src, into: rebuild(src, into, draw=not check)
+        try:
+            if not check:
+                remake(folder, folder)
+                print(f"rebuilt {folder}", flush=True)
+                continue
+            with tempfile.TemporaryDirectory() as scratch:
+                # kept, not compared: the images; an input: the suite's measured tags (read, not rewritten)
+                for name in (f for f in os.listdir(folder)
+                             if f.endswith((".png", ".pdf")) or f == shape_suite.TAGS_FILE):
+                    shutil.copy2(os.path.join(folder, name), scratch)
+                remake(folder, scratch)
+                differing += [os.path.join(folder, name) for name in differences(folder, scratch, whole=rows)]
+        except InputError as exc:
+            unreadable += 1
+            print(f"ddfbench.report.regenerate: {exc}", file=sys.stderr, flush=True)
     generated = {"claims.md": lambda path: write_committed_claims(reports, path),  # the files made from all reports
                  index.FILE: lambda path: index.write_index(reports, path)}
     for name, write in generated.items():
@@ -155,7 +165,7 @@ def from_records(reports: str, check: bool, readme: str | None = None) -> int:
     if check:
         print(f"checked {len(folders)} report(s) with records and {len(remeasured)} re-measurement(s) with their "
               f"measured rows: {len(differing)} file(s) differ", flush=True)
-    code = 1 if differing else 0
+    code = 2 if unreadable else 1 if differing else 0
     if readme and os.path.isfile(readme) and verdict.START in open(readme).read():  # the README's generated block
         code = max(code, verdict.main(["--reports", reports, "--readme", readme, *(["--check"] if check else [])]))
     return code
@@ -173,7 +183,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--note", help="first line of each report (default with overrides: 'reduced budget: ...')")
     parser.add_argument("--report-only", action="store_true", help="write the reports from existing records only")
     parser.add_argument("--from-records", action="store_true",
-                        help=f"rebuild every report below --reports from its {compact.FILE}, running nothing")
+                        help=f"rebuild every report below --reports from its {compact.FILE} and every "
+                             f"re-measurement from its {measured.FILE}, running and measuring nothing")
     parser.add_argument("--readme", help="README whose verdict block --from-records rebuilds (default: the README.md "
                                          "beside the --reports folder)")
     parser.add_argument("--check", action="store_true",

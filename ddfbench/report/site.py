@@ -10,7 +10,7 @@ The site opens from the file system with no server (plotly.js is written once be
     claims.html       reports/claims.md as a table, filterable by verdict
     gallery.html      every committed gallery.png
     <report>.html     one page per report folder with a table.csv: its runs, code commit and whether it regenerates
-                      from committed records (ddfbench.report.index), its table and its images
+                      from committed files (ddfbench.report.index), its table and its images
 
 Plots are drawn by plotly (a well-kept library), never by hand.
 """
@@ -164,7 +164,7 @@ def _slug(rel: str) -> str:
 
 
 def provenance_line(found: index.Provenance) -> str:
-    """A report folder's runs, code commit(s) and whether it regenerates from committed records, in words."""
+    """A report folder's runs, code commit(s) and whether it regenerates from committed files, in words."""
     where = {index.REGENERATES: "it regenerates from its committed records",
              index.FROM_ROWS: "a re-measurement of the runs' artifacts; it regenerates from the rows it measured",
              index.ARTIFACTS: "a re-measurement of the runs' artifacts, which stay with the runs"}.get(
