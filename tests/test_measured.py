@@ -51,6 +51,13 @@ def test_the_rows_come_back_as_written_and_the_tables_are_written_from_them(tmp_
     assert first.count(b"\n") == len(rows)
 
 
+def test_the_header_writes_the_records_folder_without_the_machines_path(tmp_path):
+    results = str(tmp_path / "res" / "pareto")
+    head = measured.header("edge_error", [results, "--out", "reports/x"], "what", [], results)
+    assert head["command"] == "`python -m ddfbench.report.edge_error <out_dir>/pareto --out reports/x`"
+    assert str(tmp_path) not in json.dumps(head)
+
+
 def test_regenerate_rebuilds_a_remeasurement_and_fails_on_a_hand_edited_table(tmp_path, capsys):
     folder = tmp_path / "pareto" / "edge_error"
     measured.write(str(folder), HEAD, edge_rows())

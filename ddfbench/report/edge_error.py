@@ -215,7 +215,7 @@ def main(argv: list[str] | None = None) -> int:
               file=sys.stderr)
         return 1
     head = measured.header("edge_error", argv, f"{len(used)} runs' saved renders ({failed} unreadable), edges at "
-                           f"depth steps > {args.jump:g}", used)
+                           f"depth steps > {args.jump:g}", used, args.results)
     md = measured.write(args.out, head, rows)
     print(md, end="")
     return 1 if failed else 0

@@ -35,11 +35,14 @@ TOOLS = ("reevaluate", "zero_level", "edge_error")  # modules of ddfbench.report
 HEADER = ("tool", "command", "what", "provenance")
 
 
-def header(tool: str, argv: list[str] | None, what: str, records: list[dict[str, Any]]) -> dict[str, str]:
-    """The parts of a table's first line: the command, what was measured, the records' code commits and the
-    measuring code's."""
+def header(tool: str, argv: list[str] | None, what: str, records: list[dict[str, Any]], results: str) -> dict[str, str]:
+    """The parts of a table's first line: the command (the records folder `results` written as
+    `<out_dir>/<its name>`: a folder of the machine that measured means nothing on a clone), what was measured, the
+    records' code commits and the measuring code's."""
+    portable_results = f"<out_dir>/{os.path.basename(os.path.normpath(results))}"
+    args = [portable_results if arg == results else arg for arg in (argv if argv is not None else sys.argv[1:])]
     return {"tool": tool,
-            "command": f"`python -m ddfbench.report.{tool} {' '.join(argv if argv is not None else sys.argv[1:])}`",
+            "command": f"`python -m ddfbench.report.{tool} {' '.join(args)}`",
             "what": what,
             "provenance": f"records of code {', '.join(c[:7] for c in code_commits(records))}, "
                           f"measured by code {(code_sha() or 'unknown')[:7]}"}

@@ -230,7 +230,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"[{i + 1}/{len(recs)}] {rec['model']} {rec['shape']['name']} seed {rec['config'].get('seed')}: "
               f"CD-L2 {done[-1]['metrics']['chamfer_l2']:.4g}", file=sys.stderr, flush=True)
     if done:
-        head = measured.header("reevaluate", argv, f"{len(done)} runs measured again ({failed} unreadable)", done)
+        head = measured.header("reevaluate", argv, f"{len(done)} runs measured again ({failed} unreadable)", done,
+                              args.results)
         print(measured.write(args.out, head, done + saved), end="")
     return 1 if failed else 0
 

@@ -171,7 +171,7 @@ def main(argv: list[str] | None = None) -> int:
         used = [r for r in sdf_recs if r["key"] in {row["key"] for row in rows}]
         other = len(recs) - len(sdf_recs)
         head = measured.header("zero_level", argv, f"{len(rows)} SDF runs ({failed} unreadable, {other} of other "
-                               "families left out)", used)
+                               "families left out)", used, args.results)
         print(measured.write(args.out, head, rows), end="")
     return 1 if failed else 0
 
