@@ -96,8 +96,9 @@ def test_a_stale_table_the_rebuild_does_not_write_is_a_difference(tmp_path, caps
     ("[]", None, r"measured\.json: needs a JSON object"),
     ('{"tool": ', None, r"measured\.json: not a readable JSON file"),
     (None, b"not gzip", r"measured\.jsonl\.gz: not measured rows"),
-    (None, gzip.compress(b'{"model": "a"}\n[1]\n'), r"measured\.jsonl\.gz: not measured rows \(line 2 is a JSON list"),
-])
+    (None, gzip.compress(b'{"model": "a"}\n[1]\n', mtime=0),
+     r"measured\.jsonl\.gz: not measured rows \(line 2 is a JSON list"),
+], ids=["unknown tool", "missing keys", "not an object", "not JSON", "not gzip", "a row not an object"])
 def test_a_bad_measured_file_is_one_line_naming_it_and_regenerate_exits_2(tmp_path, capsys, meta, rows, says):
     folder = tmp_path / "r"
     measured.write(str(folder), HEAD, edge_rows())
