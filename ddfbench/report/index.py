@@ -57,7 +57,7 @@ def provenance(folder: str) -> Provenance:
     if os.path.isfile(os.path.join(folder, compact.FILE)):
         records = compact.read_compact(os.path.join(folder, compact.FILE))
         return Provenance(len(records), sorted({sha[:7] for sha in code_commits(records)}), REGENERATES)
-    remeasured = all(os.path.isfile(os.path.join(folder, name)) for name in (measured.FILE, measured.META))
+    remeasured = measured.holds_rows(folder)
     for name in TEXTS:
         path = os.path.join(folder, name)
         if not os.path.isfile(path):
@@ -104,7 +104,8 @@ def render_index(reports: str, suite: str = "v1") -> str:
         f"{done + from_rows} of {len(rows)} report folders regenerate from committed files: {done} reports from "
         f"their records (`records.jsonl.gz`), {from_rows} re-measurements of runs' artifacts (meshes, networks, "
         f"renders) from the rows they measured (`measured.jsonl.gz`). {remeasured} re-measurements saved no rows, "
-        "and their artifacts stay with the runs; the others are reports of runs whose records stayed on the machine that ran them: their tables cannot be recomputed "
+        "and their artifacts stay with the runs; the others are reports of runs whose records stayed on the machine "
+        "that ran them: their tables cannot be recomputed "
         f"from this repository. Suite {suite}'s tiers: `conf/suite/{suite}.yaml` (`python -m ddfbench.suite status "
         f"{suite}` says which are stale). Timing benches (`bench/`) keep their raw JSON beside each table.",
         "",

@@ -102,6 +102,11 @@ def rebuild(folder: str, into: str) -> str:
     return importlib.import_module(f"ddfbench.report.{head['tool']}").write_tables(into, head, rows)
 
 
+def holds_rows(folder: str) -> bool:
+    """Whether folder holds a re-measurement's rows and header (both files)."""
+    return all(os.path.isfile(os.path.join(folder, name)) for name in (FILE, META))
+
+
 def folders(reports: str) -> list[str]:
     """Every folder below reports (any depth) that holds measured rows, sorted."""
-    return sorted(folder for folder, _, files in os.walk(reports) if FILE in files and META in files)
+    return sorted(folder for folder, _, _ in os.walk(reports) if holds_rows(folder))
