@@ -54,6 +54,10 @@ def test_a_job_costs_what_its_own_level_cost_and_a_wall_clock_job_at_least_its_b
     assert suite.job_seconds(entry, suite.Job("g", "", "steps", 0.0), {"r": [short]}) == (30, "other reports")
     no_epochs = {**short, "fit": {"seconds": 20, "epochs": None, "steps": 100}}  # unknown work: unscaled
     assert suite.job_seconds(entry, suite.Job("g", "", "epochs", 0.0, 40.0), {"r": [no_epochs]}) == (30, "other reports")
+    # a fit resumed from its checkpoint: started..finished spans its last process only (60 s of a 100 s fit)
+    resumed = {**timed("g", "", 60, 100), "fit": {"seconds": 100, "epochs": 40.0, "steps": 1000}}
+    assert suite.job_seconds(entry, suite.Job("g", "", "epochs", 0.0, 40.0), {"r": [resumed]}) == (100, "other reports")
+    assert suite.job_seconds(entry, suite.Job("g", "", "epochs", 0.0, 80.0), {"r": [resumed]}) == (200, "other reports")
     # a level's own steps (conf/model/*.yaml experiments part: pareto's c1 of the tuned GAN is 9 steps)
     levels = {job.level: job.work for job in suite.expand(suite.Entry("pareto", "x")).jobs if job.model == "gan_sdf_tuned"}
     assert levels["c1"] == 9.0 and levels["c1"] < levels["c4"]

@@ -165,16 +165,21 @@ def committed_records(reports: str) -> dict[str, list[dict[str, Any]]]:
     return out
 
 
+def _outside_fit(rec: dict[str, Any]) -> float:
+    """Wall seconds a record spent outside its fit (sampling, extraction, metrics, renders). Its started..finished
+    span is its last process's: a fit resumed from a checkpoint counts more fit seconds than that span holds."""
+    return max(0.0, (_seconds(rec) or 0.0) - float((rec.get("fit") or {}).get("seconds") or 0.0))
+
+
 def _scaled_seconds(rec: dict[str, Any], job: Job) -> float:
-    """A record's wall seconds for the job's fixed work: its fit time scaled by the job's steps or epochs over the
-    record's own (a 40-epoch job from a 0.06-epoch record), plus what it spent outside the fit; unscaled where
-    either side's work is unknown."""
+    """A record's seconds for the job's fixed work: its fit time (all of it, a resumed fit's too) scaled by the
+    job's steps or epochs over the record's own (a 40-epoch job from a 0.06-epoch record), plus what it spent outside
+    the fit; unscaled where either side's work is unknown."""
     fit = rec.get("fit") or {}
     done = {"steps": fit.get("steps"), "epochs": fit.get("epochs")}.get(job.budget)
-    wall = _seconds(rec) or 0.0
-    if not (job.work > 0 and done and fit.get("seconds")):
-        return wall
-    return wall - float(fit["seconds"]) + float(fit["seconds"]) * job.work / float(done)
+    fit_seconds = float(fit.get("seconds") or 0.0)
+    scale = job.work / float(done) if job.work > 0 and done and fit_seconds else 1.0
+    return _outside_fit(rec) + fit_seconds * scale
 
 
 def job_seconds(entry: Entry, job: Job, records: dict[str, list[dict[str, Any]]]) -> tuple[float | None, str]:
@@ -197,8 +202,7 @@ def job_seconds(entry: Entry, job: Job, records: dict[str, list[dict[str, Any]]]
         if found:
             seconds = statistics.median(_scaled_seconds(r, job) for r in found)
             if job.budget == "wall-clock":
-                outside = statistics.median(max(0.0, _seconds(r) - float((r.get("fit") or {}).get("seconds") or 0.0))
-                                            for r in found)
+                outside = statistics.median(_outside_fit(r) for r in found)
                 seconds = max(seconds, job.max_seconds + outside)
             return seconds, source
     return None, "no record"
