@@ -26,9 +26,12 @@ def test_no_renders_no_gallery(tmp_path):
     assert not (tmp_path / "gallery.png").exists()
 
 
-def test_a_row_whose_run_gave_no_result_is_marked_not_converged():
+def test_a_row_is_not_converged_only_when_every_run_it_shows_gave_no_result():
     ok = {"status": "ok", "metrics": {"chamfer_l2": 1e-5, "fscore": {"0.02": 1.0}}}
     empty = {"status": "ok", "metrics": {"chamfer_l2": 3.0, "empty_reconstruction": True, "fscore": {"0.02": 0.0}}}
-    cells = {("mesh", "bunny"): ok, ("ddf_paper", "bunny"): empty, ("ddf_paper", "cow"): ok}
+    off = {"status": "ok", "metrics": {"chamfer_l2": 0.5, "fscore": {"0.02": 0.0}}}  # a surface, nowhere near
+    cells = {("mesh", "bunny"): ok, ("ddf_paper", "bunny"): empty, ("ddf_paper", "cow"): ok,
+             ("gan_sdf", "bunny"): empty, ("gan_sdf", "cow"): off}
     assert row_label("mesh", cells) == "mesh"
-    assert row_label("ddf_paper", cells) == "ddf_paper\n(not converged)"
+    assert row_label("ddf_paper", cells) == "ddf_paper\n(no result in 1 of 2)"
+    assert row_label("gan_sdf", cells) == "gan_sdf\n(not converged)"

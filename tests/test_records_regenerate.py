@@ -265,3 +265,27 @@ def test_the_verdict_adds_a_same_grid_row_only_for_a_preset_the_shape_suite_lack
                             and r["shape"]["name"] == "bunny")
     assert row[-1].startswith(f"{bunny * 2 * 1e3:.3g} [") and row[-1].endswith("(n 2)")  # geometric mean of x1, x4
     assert not [r for r in rows if r[0] == "ddf_tuned" and r[1].startswith("same grid")]
+
+
+def test_the_verdict_says_not_converged_only_when_every_bunny_run_gave_no_result_and_counts_shapes_left_out():
+    import copy
+
+    from ddfbench.report import verdict
+
+    short = compact.read_compact(os.path.join(ROOT, "reports", "default", compact.FILE))
+    suite = compact.read_compact(os.path.join(ROOT, "reports", "shape_suite", compact.FILE))
+    suite = [r for r in suite if r["model"] in ("ddf_tuned", "neural_sdf_tuned")]
+    short, suite = copy.deepcopy(short), copy.deepcopy(suite)
+    ddf_bunny = [r for r in short if r["model"] == "ddf_tuned" and r["shape"]["name"] == "bunny"]
+    sdf_bunny = [r for r in short if r["model"] == "neural_sdf_tuned" and r["shape"]["name"] == "bunny"]
+    ddf_bunny[0]["metrics"]["empty_reconstruction"] = True  # one of its 3 seeds
+    for r in sdf_bunny:
+        r["metrics"]["empty_reconstruction"] = True  # every seed
+    lost = next(r for r in suite if r["model"] == "ddf_tuned" and r["shape"]["name"] == "cup")
+    lost["metrics"]["empty_reconstruction"] = True  # one seed on one shape of the suite
+    rows = {(r[0], r[1].split(":")[0]): r for r in verdict.rows(short, suite)}
+    assert rows[("ddf_tuned", "short")][2].startswith(f"no result, not ranked (1 of {len(ddf_bunny)} runs")
+    assert rows[("neural_sdf_tuned", "short")][2].startswith(f"not converged ({len(sdf_bunny)} of {len(sdf_bunny)}")
+    last = verdict.HEADER.index(verdict.HEADER[-1])
+    assert rows[("ddf_tuned", "own")][last].endswith("(n 11); 1 shape left out (a run gave no result)")
+    assert "left out" not in rows[("neural_sdf_tuned", "own")][last]

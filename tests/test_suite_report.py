@@ -45,12 +45,12 @@ def test_per_shape_means_then_geometric_over_shapes_and_ratios_over_shared_shape
     records = suite_records()
     cells = shape_suite.cells(records, "chamfer_l2")
     assert cells["a"]["s3"] == pytest.approx(8e-3 * (1.1 + 1 / 1.1) / 2)
-    assert set(cells["c"]) == {"s1"}  # the empty run's shape is not converged and left out
+    assert set(cells["c"]) == {"s1"}  # the empty run's shape is left out
     got = ratio(cells["a"], cells["b"])
     # per shape a / b = mean(1.1, 1/1.1) / (4 or 2): geometric mean over 3 shapes of each
     expected = (1.1 + 1 / 1.1) / 2 / math.sqrt(8)
     assert got.center == pytest.approx(expected) and got.n == 6
-    assert shape_suite.not_converged(records) == [{"model": "c", "shape": "s0", "failed": 1, "seeds": 1,
+    assert shape_suite.cells_without_result(records) == [{"model": "c", "shape": "s0", "failed": 1, "seeds": 1,
                                                    "steps": 100, "epochs": 1.0}]
 
 
@@ -73,6 +73,14 @@ def test_sections_write_the_tables_and_the_plot(tags, tmp_path):
     assert (tmp_path / "by_axis.png").stat().st_size > 10000 and (tmp_path / "by_axis.csv").exists()
 
 
+def test_a_cell_is_not_converged_only_when_every_seed_gave_no_result(tags):
+    records = [*suite_records(), rec("c", "s2", 0, 1.0, empty=True), rec("c", "s2", 1, 2e-3)]
+    per_shape = {line.split(" | ")[0].strip("| "): line.split(" | ")[-1].strip(" |")
+                 for line in shape_suite.per_shape_markdown(records, tags).splitlines()[2:]}
+    # s0: c's only seed was empty; s2: one of two seeds empty, the other a surface; s1: c's only seed a surface
+    assert (per_shape["s0"], per_shape["s2"], per_shape["s1"]) == ("not converged", "no result in 1 of 2", "1")
+
+
 def finalist_records():
     out = []
     for shape_i, shape in enumerate(("cow", "torus", "gear")):
@@ -88,7 +96,7 @@ def test_the_winner_is_the_lowest_eligible_candidate_and_is_set_against_the_runn
     records = finalist_records()
     rows = finalists.candidate_rows(records)
     c = next(r for r in rows if r["level"] == "c")
-    assert c["not_converged"] == ["gear"] and c["score"].n == 2
+    assert c["no_result_on"] == ["gear"] and c["score"].n == 2
     (verdict,) = finalists.verdicts(records, rows)
     assert (verdict["winner"], verdict["runner_up"]) == ("a", "b")
     # per shape a / b = mean(1, 1.1, 1.2) / (2 mean(1, 1.05, 1.1)) = 1.1 / 2.1, the same on every shape

@@ -309,9 +309,10 @@ def accurate_as_sdf_over_shapes(records: Records) -> list[Claim]:
                        f"(n={r['ratio'].n}, Holm p {r['p_holm']:.2g})"
                        for (a, b), r in rows.items() if (a, b) != (DDF, SDF) and math.isfinite(r["ratio"].lo))
     measured = (f"CD ratio {DDF}/{SDF} {ratio.center:.3g}× [{ratio.lo:.3g}, {ratio.hi:.3g}] (n={ratio.n} shapes, "
-                f"Holm p {row['p_holm']:.2g}); beside it: {others}")
+                f"Holm p {row['p_holm']:.2g}), {_n_points(recs)} points; beside it: {others}")
     return [Claim(name, src, paper, measured,
-                  "`shape_suite`: per-shape means over seeds, then over the evaluation shapes both converged on",
+                  "`shape_suite`: per-shape means over seeds, then over the evaluation shapes where every run of both "
+                  "gave a result",
                   verdict, f"Inference over shapes (ddfbench/report/across_shapes.py): geometric mean of per-shape "
                   f"ratios, t interval of the mean log ratio; p values Holm-corrected across the suite's family "
                   f"ratios (one family of claims). {AS_ACCURATE_RULE} A refutation also needs Holm p < 0.05.")]

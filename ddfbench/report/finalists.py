@@ -3,7 +3,7 @@ winner, and the winner against the runner-up.
 
 A candidate is a model preset at one of its `tune_finalists` levels (record config `capacity`). Its score is the
 geometric mean over the tuning shapes of its mean CD-L2 over seeds (ddfbench.report.across_shapes); a candidate
-with a run that gave no result on a shape is not converged there and is not eligible. The winner is the eligible
+with a run that gave no result on a shape is not eligible. The winner is the eligible
 candidate of lowest score; against the runner-up it is set shape by shape (n = shapes, the honest n for a claim
 about shapes) and run by run (n = shape x seed pairs, tighter but treating seeds as replicates).
 """
@@ -28,8 +28,8 @@ def candidate(rec: Record) -> tuple[str, str]:
 
 
 def candidate_rows(records: list[Record]) -> list[dict[str, Any]]:
-    """Per (model, level): shapes run, shapes not converged (a run with no result, or a failed run), the score over
-    the converged shapes, the steps (the largest of its runs)."""
+    """Per (model, level): shapes run, the shapes with a run that gave no result or failed (no_result_on), the score
+    over the other shapes, the steps (the largest of its runs)."""
     read = by_name()[CHAMFER].read
     rows = []
     for model, level in sorted(dict.fromkeys(candidate(r) for r in records)):
@@ -38,7 +38,7 @@ def candidate_rows(records: list[Record]) -> list[dict[str, Any]]:
         mine = ok_records(mine)
         per_shape = shape_means((shape_name(r), read(r)) for r in mine if shape_name(r) not in failed)
         rows.append({"model": model, "level": level, "shapes": len({shape_name(r) for r in mine}),
-                     "not_converged": failed, "per_shape": per_shape, "score": geometric(per_shape),
+                     "no_result_on": failed, "per_shape": per_shape, "score": geometric(per_shape),
                      "runs": len(mine), "steps": max((int((r.get("fit") or {}).get("steps") or 0) for r in mine),
                                                      default=0)})
     return rows
@@ -46,12 +46,12 @@ def candidate_rows(records: list[Record]) -> list[dict[str, Any]]:
 
 def verdicts(records: list[Record], rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
     """Per model: winner, runner-up, the shape-level and run-level ratio winner / runner-up. Eligible: a candidate
-    that converged on every shape any candidate of its model ran."""
+    with a result in every run on every shape any candidate of its model ran."""
     read = by_name()[CHAMFER].read
     out = []
     for model in dict.fromkeys(r["model"] for r in rows):
         shapes = max(r["shapes"] for r in rows if r["model"] == model)
-        eligible = sorted((r for r in rows if r["model"] == model and not r["not_converged"]
+        eligible = sorted((r for r in rows if r["model"] == model and not r["no_result_on"]
                            and r["score"].n == shapes and math.isfinite(r["score"].center)),
                           key=lambda r: r["score"].center)
         kept = INCUMBENT in {r["level"] for r in eligible}
@@ -85,23 +85,25 @@ def sections(records: list[Record]) -> list[str]:
     rows = candidate_rows(records)
     lines = ["## Candidates on the tuning shapes", "",
              "score: geometric mean over the tuning shapes of the mean CD-L2 ×10³ over seeds, with the t interval of "
-             "the mean log over shapes (n: shapes it converged on). Fixed work: steps as run.", "",
-             "| model | level | score CD-L2 ×10³ [95 %] | runs | steps | not converged on |", "|---|---|---|---|---|---|"]
+             "the mean log over shapes (n: shapes where every run gave a result). Fixed work: steps as run.", "",
+             "| model | level | score CD-L2 ×10³ [95 %] | runs | steps | a run with no result on |",
+             "|---|---|---|---|---|---|"]
     lines += [f"| {r['model']} | {r['level']} | {fmt(r['score'], 1e3)} | {r['runs']} | {r['steps']:,} | "
-              f"{', '.join(r['not_converged']) or '–'} |" for r in rows]
+              f"{', '.join(r['no_result_on']) or '–'} |" for r in rows]
     lines += ["", "## Winner against runner-up", "",
               "Ratio of CD-L2 winner / runner-up: by shape (geometric mean of per-shape ratios of seed means, t "
               "interval over shapes) and by run (paired shape x seed, t interval over runs). The winner is "
               "separable from the runner-up when the by-shape interval lies below 1. The winner is picked and tested "
               "on the same runs, which leans towards 'separable'; a tie here is a tie. The preset the experiments use: "
               "the winner when it is separable, else the incumbent (level a, the preset as it was), so that a change "
-              "of preset, which makes every report of it stale, rests on more than seed noise. An incumbent that did not "
-              "converge on every tuning shape is not kept: the winner replaces it, separable or not.", "",
+              "of preset, which makes every report of it stale, rests on more than seed noise. An incumbent without a "
+              "result in every run on every tuning shape is not kept: the winner replaces it, separable or not.", "",
               "| model | winner | runner-up | by shape [95 %] | by run [95 %] | separable | preset to use |",
               "|---|---|---|---|---|---|---|"]
     for v in verdicts(records, rows):
         if v["runner_up"] is None:
-            lines.append(f"| {v['model']} | {v['winner'] or 'no candidate converged on every shape'} | – | – | – | – | "
+            winner = v["winner"] or "no candidate had a result in every run"
+            lines.append(f"| {v['model']} | {winner} | – | – | – | – | "
                          f"{preset_to_use(v, separable=False)} |")
             continue
         separable = math.isfinite(v["by_shape"].hi) and v["by_shape"].hi < 1

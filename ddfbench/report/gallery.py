@@ -100,9 +100,12 @@ def _label(record: dict[str, Any]) -> str:
 
 
 def row_label(model: str, cells: dict[tuple[str, str], dict[str, Any]]) -> str:
-    """A row's label: the model, marked "not converged" where a run it shows gave no result (empty or off the shape)."""
-    untrained = any(no_result(rec) for (m, _), rec in cells.items() if m == model)
-    return f"{model}\n(not converged)" if untrained else model
+    """A row's label: the model, marked "not converged" where every run it shows gave no result (empty or off the
+    shape), "no result in k of n" where some did."""
+    shown = [no_result(rec) for (m, _), rec in cells.items() if m == model]
+    if not any(shown):
+        return model
+    return f"{model}\n(not converged)" if all(shown) else f"{model}\n(no result in {sum(shown)} of {len(shown)})"
 
 
 def write_gallery(records: list[dict[str, Any]], out_dir: str) -> str | None:

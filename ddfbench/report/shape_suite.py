@@ -2,8 +2,9 @@
 family ratios (Holm-corrected), and how accuracy moves along each difficulty axis.
 
 Inference is over shapes (ddfbench.report.across_shapes): a family's value on a shape is the mean over its seeds;
-a (family, shape) cell with a run that gave no result (an empty mesh or one off the shape) is "not converged",
-is listed, and is left out of the family's summaries and ratios (n says how many shapes remain).
+a (family, shape) cell with a run that gave no result (an empty mesh or one off the shape) is listed and left out
+of the family's summaries and ratios (n says how many shapes remain); "not converged" is kept for a cell whose every
+run gave no result, as in the report's main table.
 
 The tags are measured once from the meshes (ddfbench.truth.difficulty) into shapes.csv beside the report and read
 from there afterwards, so a rebuild from the compact records needs no mesh.
@@ -74,7 +75,8 @@ def _p(x: float) -> str:
 
 
 def cells(records: list[Record], metric: str) -> dict[str, dict[str, float]]:
-    """{model: {shape: mean over seeds}} of the metric over the converged (model, shape) cells."""
+    """{model: {shape: mean over seeds}} of the metric over the (model, shape) cells where every run gave a
+    result (the others: cells_without_result)."""
     read = by_name()[metric].read
     runs = ok_records(records)
     failed = {(r.get("model"), shape_name(r)) for r in records if r.get("status") != "ok" or no_result(r)}
@@ -85,9 +87,10 @@ def cells(records: list[Record], metric: str) -> dict[str, dict[str, float]]:
     return out
 
 
-def not_converged(records: list[Record]) -> list[dict[str, Any]]:
+def cells_without_result(records: list[Record]) -> list[dict[str, Any]]:
     """One row per (model, shape) cell with a run that gave no result or failed: how many of its seeds, steps,
-    epochs (a failed run counts as no result: it has no metrics)."""
+    epochs (a failed run counts as no result: it has no metrics). Only a cell with failed == seeds is not
+    converged; the others converged in some seeds."""
     rows: dict[tuple[str, str], dict[str, Any]] = {}
     for r in records:
         row = rows.setdefault((str(r.get("model")), shape_name(r)), {"model": r.get("model"), "shape": shape_name(r),
@@ -171,11 +174,17 @@ def tags_markdown(tags: pd.DataFrame) -> str:
                 "components", "provenance", "license"], rows)
 
 
+def _no_result(cell: dict[str, Any]) -> str:
+    """A per-shape cell whose runs gave no result in some seeds ('no result in k of n') or all ('not converged')."""
+    return "not converged" if cell["failed"] == cell["seeds"] else f"no result in {cell['failed']} of {cell['seeds']}"
+
+
 def per_shape_markdown(records: list[Record], tags: pd.DataFrame) -> str:
     """One row per shape: its faces and genus, the labels each sample kind got (mean over seeds), and each model's
-    CD-L2 x10^3 (mean over seeds; 'not converged' where a run gave no result)."""
+    CD-L2 x10^3 (mean over seeds; where a run gave no result, 'no result in k of n' or, in every run, 'not
+    converged')."""
     cd = cells(records, CHAMFER)
-    failed = {(str(r["model"]), r["shape"]) for r in not_converged(records)}
+    failed = {(str(r["model"]), r["shape"]): r for r in cells_without_result(records)}
     labels = cells(records, "n_samples")
     by_tag = tags.set_index("shape")
     models = list(cd)
@@ -186,8 +195,8 @@ def per_shape_markdown(records: list[Record], tags: pd.DataFrame) -> str:
         t = by_tag.loc[shape]
         rows.append([shape, f"{int(t['faces']):,}", str(int(t["genus"]))]
                     + [f"{labels[m][shape]:,.0f}" if shape in labels[m] else "–" for m in label_models]
-                    + ["not converged" if (m, shape) in failed else f"{1e3 * cd[m][shape]:.3g}" if shape in cd[m]
-                       else "–" for m in models])
+                    + [_no_result(failed[m, shape]) if (m, shape) in failed else f"{1e3 * cd[m][shape]:.3g}"
+                       if shape in cd[m] else "–" for m in models])
     header = ["shape", "faces", "genus"] + [f"labels of {m}" for m in label_models] + [f"{m} CD-L2 ×10³" for m in models]
     return pipe_table(header, rows)
 
@@ -196,7 +205,8 @@ def sections(records: list[Record], out_dir: str, draw: bool = True) -> list[str
     """The markdown sections of the suite report (and their .csv files, and by_axis.png unless not draw, written
     into out_dir)."""
     tags = tags_table(out_dir, sorted({shape_name(r) for r in records}))
-    fam, pairs, axes, failed = family_rows(records), pair_rows(records), axis_rows(records, tags), not_converged(records)
+    fam, pairs, axes = family_rows(records), pair_rows(records), axis_rows(records, tags)
+    failed = cells_without_result(records)
     out = ["## The shapes and their measured difficulty\n\nthinnest: 1st percentile of the inward wall thickness "
            "(longest side 1; 'open': no inside); genus: handles and through-holes; creases: length of edges over 30° "
            "per sqrt(area); detail: 90th percentile of |mean curvature| in balls of radius 0.01; open boundary: share "
@@ -213,9 +223,10 @@ def sections(records: list[Record], out_dir: str, draw: bool = True) -> list[str
                f"Evaluation points per surface: {_points(records)}.\n\n"
                + pipe_table(header, [[r["model"], fmt(r["chamfer"], 1e3), fmt(r["fscore"]), fmt(r["fit_s"]),
                                fmt(r["storage"])] for r in fam]))
-    out.append("## Family against family, shape by shape\n\nCD-L2 of a over b: the geometric mean over the shapes "
-               "both converged on of the per-shape ratio, with the t interval of the mean log ratio; p: two-sided t "
-               "test of log ratio 0; **Holm-corrected across the rows of this table** (one family of claims).\n\n"
+    out.append("## Family against family, shape by shape\n\nCD-L2 of a over b: the geometric mean of the per-shape "
+               "ratio over the shapes where every run of both gave a result, with the t interval of the mean log "
+               "ratio; p: two-sided t test of log ratio 0; **Holm-corrected across the rows of this table** (one "
+               "family of claims).\n\n"
                + pipe_table(["a", "b", "CD-L2 a / b [95 %] (n shapes)", "p", "p (Holm)"],
                      [[r["a"], r["b"], fmt(r["ratio"]), _p(r["ratio"].p), _p(r["p_holm"])] for r in pairs]))
     out.append("## Along each difficulty axis\n\nPer model: Spearman rho between the tag and the per-shape CD-L2 "
@@ -230,7 +241,9 @@ def sections(records: list[Record], out_dir: str, draw: bool = True) -> list[str
                         if math.isfinite(r["lo"]) else f"{r['ratio']:.3g}"),
                        _p(r["p"]), _p(r["p_holm"])] for r in axes]))
     if failed:
-        out.append("## Not converged (left out of the summaries above)\n\n"
+        out.append("## Shapes with a run that gave no result (left out of the summaries above)\n\n"
+                   "Not converged where every run of the cell gave no result; the others converged in some seeds "
+                   "only, so their mean over seeds would mix surfaces with penalties or off-shape values.\n\n"
                    + pipe_table(["model", "shape", "runs with no result", "steps", "epochs"],
                          [[str(r["model"]), r["shape"], f"{r['failed']} of {r['seeds']}", str(r.get("steps")),
                            "–" if r.get("epochs") is None else f"{float(r['epochs']):.3g}"] for r in failed]))

@@ -9,9 +9,10 @@ presets the shape suite lacks (the feature-grid DDF and SDF) get their row from 
 steps for every family), beside its geometric mean over that report's shapes. Per row: CD-L2 as a multiple of the noise floor (the
 mesh against a resample of itself at the same point count) with the 95 % t interval over seeds, the point-to-surface
 chamfer, F@0.005, depth MAE and mask IoU where the run rendered, fit or build seconds, warm frame seconds, bytes. A
-preset with a run that gave no mesh or one off the shape says "not converged" and is not ranked. The footnote names
-the device, threads, point counts and code commits of the records. --check exits 1 when reports/verdict.md or the
-README block differs from what the records give.
+preset with a run on the bunny that gave no mesh or one off the shape is not ranked: its row says "not converged"
+when every run gave none, else in how many runs; the shapes left out of the last column for such a run are counted.
+The footnote names the device, threads, point counts and code commits of the records. --check exits 1 when
+reports/verdict.md or the README block differs from what the records give.
 """
 
 from __future__ import annotations
@@ -27,7 +28,7 @@ from ddfbench.evaluate.metric_registry import by_name
 from ddfbench.report import compact
 from ddfbench.report.across_shapes import fmt, geometric
 from ddfbench.report.records import Record, at_largest_image, no_result, ok_records, shape_name
-from ddfbench.report.shape_suite import cells, not_converged
+from ddfbench.report.shape_suite import cells, cells_without_result
 from ddfbench.report.stats import summarize_values
 from ddfbench.report.tables import pipe_table
 
@@ -101,14 +102,16 @@ def rows(short: list[Record], full: list[Record], frames: list[Record] = (),
             failed = sum(no_result(r) for r in mine)
             if failed:
                 steps = sorted({(r.get("fit") or {}).get("steps") for r in mine})
-                out.append([model, budget, f"not converged ({failed} of {len(mine)} runs, steps {steps})"]
+                how = "not converged" if failed == len(mine) else "no result, not ranked"
+                out.append([model, budget, f"{how} ({failed} of {len(mine)} runs, steps {steps})"]
                            + ["–"] * (len(HEADER) - 3))
                 continue
             suite = "–"
             if model in over_shapes.get(label, {}):
                 suite = fmt(geometric(over_shapes[label][model]), 1e3)
-                missed = sum(1 for row in not_converged(recs) if row["model"] == model)
-                suite += f"; not converged on {missed} shape{'s' if missed > 1 else ''}" if missed else ""
+                missed = sum(1 for row in cells_without_result(recs) if row["model"] == model)
+                left_out = f"; {missed} shape{'s' if missed > 1 else ''} left out (a run gave no result)"
+                suite += left_out if missed else ""
             rendered = mine if label == "short" else largest_frames(list(frames), mine)
             image = (f"{_mean(rendered, 'depth_mae', 1e3)} / {_mean(rendered, 'mask_iou', 1.0, '.3f')}"
                      if _mean(rendered, "mask_iou") != "–" else "–")

@@ -1,15 +1,15 @@
 #!/bin/bash
 # Sourced by the second call's scripts (run_race.sh, run_train_curves.sh) in the repo root: Warp (sent in two
-# parts: /root/stage/wA from stage_and_parts.sh, .devB/wB) and the missing wheels into /tmp/site, the bunny
+# parts: $DDFBENCH_STAGE/wA (default ~/stage) from stage_and_parts.sh, .devB/wB) and the missing wheels into /tmp/site, the bunny
 # into /tmp/meshes; exports PYTHONPATH, DDFBENCH_GIT_SHA=$1, DDFBENCH_SAMPLE_MESHES and T0 (the start).
-export PYTHONUNBUFFERED=1 DDFBENCH_GIT_SHA=$1 DDFBENCH_SAMPLE_MESHES=/tmp/meshes WARP_CACHE_PATH=/tmp/warpcache
+export STAGE=${DDFBENCH_STAGE:-$HOME/stage} PYTHONUNBUFFERED=1 DDFBENCH_GIT_SHA=$1 DDFBENCH_SAMPLE_MESHES=/tmp/meshes WARP_CACHE_PATH=/tmp/warpcache
 T0=$(date +%s)
 mkdir -p /tmp/site /tmp/meshes
 python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade --target /tmp/site .devB/*.whl || exit 3
 python3 - <<'PY' || exit 4
-import lzma, shutil, tarfile
+import lzma, os, shutil, tarfile
 with open("/tmp/warp.so.xz", "wb") as out:
-    for part in ("/root/stage/wA", ".devB/wB"):
+    for part in (os.path.join(os.environ["STAGE"], "wA"), ".devB/wB"):
         with open(part, "rb") as f:
             shutil.copyfileobj(f, out)
 with tarfile.open(".devB/rest.tar.xz") as tar:

@@ -4,7 +4,8 @@
 # ddf_tuned, so leave it out when the second call measures cold costs), then (GPU_TESTS, a pytest path list;
 # default none) pytest -m gpu on them, e.g. GPU_TESTS=tests/test_trace_device.py (no Warp needed either).
 cd "$(dirname "$0")/.."
-mkdir -p /root/stage /tmp/site && cp .devA/wA /root/stage/wA
+STAGE=${DDFBENCH_STAGE:-$HOME/stage}  # outside the working tree: the second call finds Warp's first part here
+mkdir -p "$STAGE" /tmp/site && cp .devA/wA "$STAGE/wA"
 python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade --target /tmp/site .devA/*.whl || exit 3
 export PYTHONPATH=/tmp/site:$PWD PYTHONUNBUFFERED=1
 nvidia-smi --query-gpu=name,driver_version,clocks.max.sm,power.limit,memory.total --format=csv | tee $OUT/gpu.csv
