@@ -3,9 +3,9 @@ winner, and the winner against the runner-up.
 
 A candidate is a model preset at one of its `tune_finalists` levels (record config `capacity`). Its score is the
 geometric mean over the tuning shapes of its mean CD-L2 over seeds (ddfbench.report.across_shapes); a candidate
-with a run that gave no result on a shape is not eligible. The winner is the eligible
-candidate of lowest score; against the runner-up it is set shape by shape (n = shapes, the honest n for a claim
-about shapes) and run by run (n = shape x seed pairs, tighter but treating seeds as replicates).
+with a run that gave no result on a shape is not eligible. The winner is the eligible candidate of lowest score;
+against the runner-up it is set shape by shape (n = shapes, the honest n for a claim about shapes) and run by run
+(n = shape x seed pairs, tighter but treating seeds as replicates).
 """
 
 from __future__ import annotations

@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from ddfbench.report.records import no_result, shape_name
+from ddfbench.report.records import no_result, no_result_label, shape_name
 
 GALLERY = "gallery.png"
 TITLE = "Gallery: oracle | family | error | extracted mesh, camera 0"
@@ -105,7 +105,7 @@ def row_label(model: str, cells: dict[tuple[str, str], dict[str, Any]]) -> str:
     shown = [no_result(rec) for (m, _), rec in cells.items() if m == model]
     if not any(shown):
         return model
-    return f"{model}\n(not converged)" if all(shown) else f"{model}\n(no result in {sum(shown)} of {len(shown)})"
+    return f"{model}\n({no_result_label(sum(shown), len(shown))})"
 
 
 def write_gallery(records: list[dict[str, Any]], out_dir: str) -> str | None:

@@ -59,6 +59,14 @@ def no_result(rec: Record) -> bool:
     return empty_mesh(rec) or off_shape(rec)
 
 
+NOT_CONVERGED = "not converged"  # a row or cell whose every reconstruction was empty or off the shape
+
+
+def no_result_label(failed: int, runs: int) -> str:
+    """A cell's runs without a result: 'not converged' when every one of them, else 'no result in k of n'."""
+    return NOT_CONVERGED if failed == runs else f"no result in {failed} of {runs}"
+
+
 def at_largest_image(records: Iterable[Record]) -> tuple[int, list[Record]]:
     """(width in pixels, the ok records rendered at the largest image width among them): one frame time per fitted
     model where a sweep rendered each fit at several sizes."""

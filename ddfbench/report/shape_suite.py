@@ -24,7 +24,7 @@ from scipy import stats as _scipy_stats
 
 from ddfbench.evaluate.metric_registry import by_name
 from ddfbench.report.across_shapes import bounded, fmt, geometric, holm, ratio, shape_means
-from ddfbench.report.records import Record, no_result, ok_records, shape_name
+from ddfbench.report.records import Record, no_result, no_result_label, ok_records, shape_name
 from ddfbench.report.stats import LEVEL
 from ddfbench.report.tables import pipe_table
 from ddfbench.truth.suite import SUITE_V1
@@ -174,17 +174,13 @@ def tags_markdown(tags: pd.DataFrame) -> str:
                 "components", "provenance", "license"], rows)
 
 
-def _no_result(cell: dict[str, Any]) -> str:
-    """A per-shape cell whose runs gave no result in some seeds ('no result in k of n') or all ('not converged')."""
-    return "not converged" if cell["failed"] == cell["seeds"] else f"no result in {cell['failed']} of {cell['seeds']}"
-
-
 def per_shape_markdown(records: list[Record], tags: pd.DataFrame) -> str:
     """One row per shape: its faces and genus, the labels each sample kind got (mean over seeds), and each model's
     CD-L2 x10^3 (mean over seeds; where a run gave no result, 'no result in k of n' or, in every run, 'not
     converged')."""
     cd = cells(records, CHAMFER)
-    failed = {(str(r["model"]), r["shape"]): r for r in cells_without_result(records)}
+    failed = {(str(r["model"]), r["shape"]): no_result_label(r["failed"], r["seeds"])
+              for r in cells_without_result(records)}
     labels = cells(records, "n_samples")
     by_tag = tags.set_index("shape")
     models = list(cd)
@@ -195,7 +191,7 @@ def per_shape_markdown(records: list[Record], tags: pd.DataFrame) -> str:
         t = by_tag.loc[shape]
         rows.append([shape, f"{int(t['faces']):,}", str(int(t["genus"]))]
                     + [f"{labels[m][shape]:,.0f}" if shape in labels[m] else "–" for m in label_models]
-                    + [_no_result(failed[m, shape]) if (m, shape) in failed else f"{1e3 * cd[m][shape]:.3g}"
+                    + [failed[m, shape] if (m, shape) in failed else f"{1e3 * cd[m][shape]:.3g}"
                        if shape in cd[m] else "–" for m in models])
     header = ["shape", "faces", "genus"] + [f"labels of {m}" for m in label_models] + [f"{m} CD-L2 ×10³" for m in models]
     return pipe_table(header, rows)

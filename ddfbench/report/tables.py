@@ -22,7 +22,7 @@ import numpy as np
 import pandas as pd
 
 from ddfbench.evaluate import metric_registry
-from ddfbench.report.records import OFF_SHAPE_RULE, empty_mesh, off_shape
+from ddfbench.report.records import NOT_CONVERGED, OFF_SHAPE_RULE, empty_mesh, off_shape
 from ddfbench.report.stats import INTERVAL_NAME, best_and_ties, summarize_values, within_range
 from ddfbench.run.runs import NON_SEMANTIC_KEYS
 
@@ -30,7 +30,6 @@ FLOOR_MODEL = "noise floor"  # the `model` cell of a noise-floor row
 SEED_KEYS = ("seed",)
 INCOMPLETE = "†"  # marks a row with fewer ok runs than the fullest row
 TIE = "≈"  # marks values whose interval overlaps the best one's
-NOT_CONVERGED = "not converged"  # the n cell of a row whose every reconstruction was empty or off the shape
 
 
 def _metrics() -> dict[str, metric_registry.Metric]:
