@@ -289,3 +289,22 @@ def test_the_verdict_says_not_converged_only_when_every_bunny_run_gave_no_result
     last = verdict.HEADER.index(verdict.HEADER[-1])
     assert rows[("ddf_tuned", "own")][last].endswith("(n 11); 1 shape left out (a run gave no result)")
     assert "left out" not in rows[("neural_sdf_tuned", "own")][last]
+
+
+def test_the_verdict_gives_a_preset_budgeted_in_epochs_its_own_row_without_a_column_over_shapes():
+    import copy
+
+    from ddfbench.report import verdict
+
+    short = compact.read_compact(os.path.join(ROOT, "reports", "default", compact.FILE))
+    epochs = []
+    for model in ("gan_sdf", "ddf_tuned"):  # ddf_tuned is in the shape suite (here: short): its own row stands
+        for r in copy.deepcopy([r for r in short if r["model"] == "ddf_tuned"]):
+            r["model"], r["family"] = model, "gan_sdf"
+            r["fit"].update(budget="epochs", epochs=40.0007, steps=38982)
+            epochs.append(r)
+    rows = {(r[0], r[1]): r for r in verdict.rows(short, short, epochs=epochs)}
+    row = rows[("gan_sdf", "own: 40 epochs")]
+    assert row[-1] == "–" and row[verdict.HEADER.index("bytes")] != "–"
+    assert not [r for r in rows if r[0] == "ddf_tuned" and r[1].endswith("epochs")]
+    assert list(rows)[-1][0] == "gan_sdf"  # the GAN family comes last

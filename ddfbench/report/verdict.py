@@ -6,13 +6,14 @@ minute on 2 cores, with renders), the preset's own budget is `reports/shape_suit
 beside its geometric mean over the suite's evaluation shapes, with the frame columns from `reports/render_time` (the
 same preset at the same fit_steps, its largest images; `reports/render_shapes` for a preset render_time lacks). The
 presets the shape suite lacks (the feature-grid DDF and SDF) get their row from `reports/grid_encodings` (equal
-steps for every family), beside its geometric mean over that report's shapes. Per row: CD-L2 as a multiple of the noise floor (the
-mesh against a resample of itself at the same point count) with the 95 % t interval over seeds, the point-to-surface
-chamfer, F@0.005, depth MAE and mask IoU where the run rendered, fit or build seconds, warm frame seconds, bytes. A
-preset with a run on the bunny that gave no mesh or one off the shape is not ranked: its row says "not converged"
-when every run gave none, else in how many runs; the shapes left out of the last column for such a run are counted.
-The footnote names the device, threads, point counts and code commits of the records. --check exits 1 when
-reports/verdict.md or the README block differs from what the records give.
+steps for every family), beside its geometric mean over that report's shapes; a preset whose own budget is epochs
+(the thesis GAN at its 40) gets its own row from `reports/gan_epochs` (the bunny only). Per row: CD-L2 as a multiple
+of the noise floor (the mesh against a resample of itself at the same point count) with the 95 % t interval over
+seeds, the point-to-surface chamfer, F@0.005, depth MAE and mask IoU where the run rendered, fit or build seconds,
+warm frame seconds, bytes. A preset with a run on the bunny that gave no mesh or one off the shape is not ranked: its
+row says "not converged" when every run gave none, else in how many runs; the shapes left out of the last column for
+such a run are counted. The footnote names the device, threads, point counts and code commits of the records.
+--check exits 1 when reports/verdict.md or the README block differs from what the records give.
 """
 
 from __future__ import annotations
@@ -34,10 +35,12 @@ from ddfbench.report.tables import pipe_table
 
 START, END = "<!-- verdict:start (python -m ddfbench.report.verdict) -->", "<!-- verdict:end -->"
 SHORT, FULL, FRAMES, OTHER_FRAMES, GRID = "default", "shape_suite", "render_time", "render_shapes", "grid_encodings"
+EPOCHS = "gan_epochs"
 SHAPE = "bunny"
 FAMILY_ORDER = ["mesh", "grid_sdf", "neural_sdf", "ddf", "gan_sdf"]  # the reference first, then the fields
-HEADER = ["preset", "budget", "CD-L2 / floor, geometric mean [95 %]", "p2s CD-L2 ×10³", "F@0.005", "depth MAE ×10³ / mask IoU",
-          "fit or build s", "warm frame s", "bytes", "over the suite's shapes: CD-L2 ×10³ [95 %]"]
+HEADER = ["preset", "budget", "CD-L2 / floor, geometric mean [95 %]", "p2s CD-L2 ×10³", "F@0.005",
+          "depth MAE ×10³ / mask IoU", "fit or build s", "warm frame s", "bytes",
+          "over the suite's shapes: CD-L2 ×10³ [95 %]"]
 
 
 def _floor(rec: Record) -> float:
@@ -58,6 +61,9 @@ def _ratio_to_floor(recs: list[Record]) -> str:
 
 
 def _steps(recs: list[Record]) -> str:
+    """The records' fixed work: 'built', their epochs where every fit was budgeted in epochs, else their steps."""
+    if recs and all((r.get("fit") or {}).get("budget") == "epochs" for r in recs):
+        return " / ".join(f"{n:,}" for n in sorted({round(r["fit"]["epochs"]) for r in recs})) + " epochs"
     steps = sorted({int((r.get("fit") or {}).get("steps") or 0) for r in recs})
     if steps == [0] or steps == [1]:
         return "built"
@@ -82,19 +88,21 @@ def largest_frames(frames: list[Record], like: list[Record]) -> list[Record]:
 
 
 def rows(short: list[Record], full: list[Record], frames: list[Record] = (),
-         grid: list[Record] = ()) -> list[list[str]]:
+         grid: list[Record] = (), epochs: list[Record] = ()) -> list[list[str]]:
     """The table's rows: per model of the record sets, its short-budget row, its own-budget row (whose frame columns
-    come from the largest images of the same preset at the same fit_steps in `frames`), and for a model the shape
-    suite lacks its row from `grid` (grid_encodings: equal steps for every family)."""
-    grid = [r for r in grid if r.get("model") not in {x.get("model") for x in full}]
-    budgets = ((short, "short"), (full, "own"), (grid, "same grid"))
-    over_shapes = {label: cells(recs, "chamfer_l2") for recs, label in budgets[1:]}
-    family = {str(r.get("model")): str(r.get("family")) for r in ok_records([*short, *full, *grid])}
+    come from the largest images of the same preset at the same fit_steps in `frames`; for a model the shape suite
+    lacks, from `epochs`: gan_epochs, its fit budgeted in epochs, with no column over shapes), and for a model the
+    shape suite lacks its row from `grid` (grid_encodings: equal steps for every family)."""
+    in_suite = {x.get("model") for x in full}
+    grid, epochs = ([r for r in recs if r.get("model") not in in_suite] for recs in (grid, epochs))
+    budgets = ((short, "short", False), (full, "own", True), (epochs, "own", False), (grid, "same grid", True))
+    over_shapes = [cells(recs, "chamfer_l2") if across else {} for recs, _, across in budgets]
+    family = {str(r.get("model")): str(r.get("family")) for r in ok_records([*short, *full, *epochs, *grid])}
     models = sorted(family, key=lambda m: (FAMILY_ORDER.index(family[m]) if family[m] in FAMILY_ORDER
                                            else len(FAMILY_ORDER), m))
     out = []
     for model in models:
-        for recs, label in budgets:
+        for (recs, label, _), over in zip(budgets, over_shapes):
             mine = [r for r in ok_records(recs) if r.get("model") == model and shape_name(r) == SHAPE]
             if not mine:
                 continue
@@ -107,8 +115,8 @@ def rows(short: list[Record], full: list[Record], frames: list[Record] = (),
                            + ["–"] * (len(HEADER) - 3))
                 continue
             suite = "–"
-            if model in over_shapes.get(label, {}):
-                suite = fmt(geometric(over_shapes[label][model]), 1e3)
+            if model in over:
+                suite = fmt(geometric(over[model]), 1e3)
                 missed = sum(1 for row in cells_without_result(recs) if row["model"] == model)
                 left_out = f"; {missed} shape{'s' if missed > 1 else ''} left out (a run gave no result)"
                 suite += left_out if missed else ""
@@ -141,7 +149,8 @@ def footnote(sets: dict[str, list[Record]]) -> str:
             "fit_steps in the shape suite, whose last column is the geometric mean over its evaluation shapes, "
             "per-axis in `reports/shape_suite/report.md`, and its image columns from `reports/render_time`'s "
             "largest frames (or `reports/render_shapes`' for a preset render_time lacks), the same preset at the "
-            "same steps; same grid: `reports/grid_encodings`, every family at 3,000 steps, for the presets the shape "
+            "same steps; own, in epochs: `reports/gan_epochs`, the thesis GAN at its 40 epochs, the bunny only; "
+            "same grid: `reports/grid_encodings`, every family at 3,000 steps, for the presets the shape "
             "suite lacks, its last column over that report's shapes). " + "; ".join(parts) + ".")
 
 
@@ -153,10 +162,10 @@ def frame_records(sets: dict[str, list[Record]]) -> list[Record]:
 
 def table(reports: str) -> str:
     sets = {}
-    for name in (SHORT, FULL, FRAMES, OTHER_FRAMES, GRID):
+    for name in (SHORT, FULL, FRAMES, OTHER_FRAMES, GRID, EPOCHS):
         path = os.path.join(reports, name, compact.FILE)
         sets[name] = compact.read_compact(path) if os.path.isfile(path) else []
-    return pipe_table(HEADER, rows(sets[SHORT], sets[FULL], frame_records(sets), sets[GRID])) + "\n" \
+    return pipe_table(HEADER, rows(sets[SHORT], sets[FULL], frame_records(sets), sets[GRID], sets[EPOCHS])) + "\n" \
         + footnote(sets) + "\n"
 
 
