@@ -433,3 +433,22 @@ def test_the_gpu_race_claims_read_the_committed_repeats_file(tmp_path):
     old = {c.claim: c for c in cl.renders_faster_on_gpu(cl.load_committed(str(tmp_path)))}
     assert old["DDF renders faster than a GPU BVH (Warp)"].verdict == cl.NO_RECORDS
     assert all(c.verdict == cl.NO_RECORDS for c in cl.renders_faster_on_gpu(cl.load_committed(str(tmp_path / "none"))))
+
+
+def test_the_plateau_row_gives_how_far_the_gan_s_error_fell_between_its_last_two_probes():
+    def gan(seed, fell_to):
+        r = rec("gan_epochs", "gan_sdf", seed, 1e-4, family="gan_sdf")
+        r["metrics"]["fscore"] = {"0.02": 0.9}
+        r["fit"] = {"steps": 3000, "epochs": 40.0, "probes": [
+            {"step": 300, "chamfer_l2": 1e-2}, {"step": 1000, "chamfer_l2": 4e-4},
+            {"step": 3000, "chamfer_l2": 4e-4 * fell_to}]}
+        return r
+
+    def row(recs):
+        return next(c for c in claims.evaluate(records(gan_epochs=recs)) if "plateau" in c.claim)
+
+    assert row([]).verdict == claims.NO_RECORDS and row([]).measured == "–"
+    halved = row([gan(s, jitter(s, 0.5)) for s in SEEDS])
+    assert halved.verdict == claims.NOT_TESTABLE  # no probe after the 40th epoch
+    assert "(epochs 13.3 to 40): 0.5× [" in halved.measured and halved.measured.endswith("(n=3 runs)")
+    assert "(epochs 13.3 to 40): 0.9× [" in row([gan(s, jitter(s, 0.9)) for s in SEEDS]).measured
