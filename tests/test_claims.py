@@ -436,12 +436,12 @@ def test_the_gpu_race_claims_read_the_committed_repeats_file(tmp_path):
 
 
 def test_the_plateau_row_gives_how_far_the_gan_s_error_fell_between_its_last_two_probes():
-    def gan(seed, fell_to):
+    def gan(seed, fell_to, before=4e-4, widest_f=0.9):
         r = rec("gan_epochs", "gan_sdf", seed, 1e-4, family="gan_sdf")
-        r["metrics"]["fscore"] = {"0.02": 0.9}
-        r["fit"] = {"steps": 3000, "epochs": 40.0, "probes": [
-            {"step": 300, "chamfer_l2": 1e-2}, {"step": 1000, "chamfer_l2": 4e-4},
-            {"step": 3000, "chamfer_l2": 4e-4 * fell_to}]}
+        r["metrics"]["fscore"] = {"0.02": widest_f}
+        r["fit"] = {"steps": 3000, "epochs": 40.0, "probes": [  # out of step order, as a resumed fit may write them
+            {"step": 3000, "chamfer_l2": 4e-4 * fell_to}, {"step": 300, "chamfer_l2": 1e-2},
+            {"step": 1000, "chamfer_l2": before}]}
         return r
 
     def row(recs):
@@ -452,3 +452,8 @@ def test_the_plateau_row_gives_how_far_the_gan_s_error_fell_between_its_last_two
     assert halved.verdict == claims.NOT_TESTABLE  # no probe after the 40th epoch
     assert "(epochs 13.3 to 40): 0.5× [" in halved.measured and halved.measured.endswith("(n=3 runs)")
     assert "(epochs 13.3 to 40): 0.9× [" in row([gan(s, jitter(s, 0.9)) for s in SEEDS]).measured
+    vanished = [gan(s, 0.5) for s in SEEDS[:2]] + [gan(2, 0.5, before=8.64)]  # no surface at 13.3 epochs: the penalty
+    assert row(vanished).measured.endswith("0.5× [0.5, 0.5] (n=2 runs); 1 run left out "
+                                           "(a probe without a surface or an epoch count)")
+    failed = row([gan(s, 0.5, widest_f=0.0) for s in SEEDS])  # every final mesh off the shape
+    assert failed.verdict == claims.NOT_TESTABLE and failed.measured == "no run gave a result"

@@ -5,9 +5,9 @@ One row per preset and budget: the short budget is `reports/default` (each famil
 minute on 2 cores, with renders), the preset's own budget is `reports/shape_suite` (its fit_steps) on the bunny,
 beside its geometric mean over the suite's evaluation shapes, with the frame columns from `reports/render_time` (the
 same preset at the same fit_steps, its largest images; `reports/render_shapes` for a preset render_time lacks). The
-presets the shape suite lacks (the feature-grid DDF and SDF) get their row from `reports/grid_encodings` (equal
-steps for every family), beside its geometric mean over that report's shapes; a preset whose own budget is epochs
-(the thesis GAN at its 40) gets its own row from `reports/gan_epochs` (the bunny only). Per row: CD-L2 as a multiple
+presets the shape suite lacks get a row from `reports/grid_encodings` (the feature-grid DDF and SDF; equal steps
+for every family), beside its geometric mean over that report's shapes, and their own-budget row from
+`reports/gan_epochs` (the thesis GAN at its 40 epochs, the bunny only). Per row: CD-L2 as a multiple
 of the noise floor (the mesh against a resample of itself at the same point count) with the 95 % t interval over
 seeds, the point-to-surface chamfer, F@0.005, depth MAE and mask IoU where the run rendered, fit or build seconds,
 warm frame seconds, bytes. A preset with a run on the bunny that gave no mesh or one off the shape is not ranked: its
@@ -28,10 +28,10 @@ from ddfbench.core.errors import InputError
 from ddfbench.evaluate.metric_registry import by_name
 from ddfbench.report import compact
 from ddfbench.report.across_shapes import fmt, geometric
-from ddfbench.report.records import Record, at_largest_image, no_result, ok_records, shape_name
+from ddfbench.report.records import Record, as_float, at_largest_image, no_result, ok_records, shape_name
 from ddfbench.report.shape_suite import cells, cells_without_result
 from ddfbench.report.stats import summarize_values
-from ddfbench.report.tables import pipe_table
+from ddfbench.report.tables import budget_label, pipe_table
 
 START, END = "<!-- verdict:start (python -m ddfbench.report.verdict) -->", "<!-- verdict:end -->"
 SHORT, FULL, FRAMES, OTHER_FRAMES, GRID = "default", "shape_suite", "render_time", "render_shapes", "grid_encodings"
@@ -62,8 +62,9 @@ def _ratio_to_floor(recs: list[Record]) -> str:
 
 def _steps(recs: list[Record]) -> str:
     """The records' fixed work: 'built', their epochs where every fit was budgeted in epochs, else their steps."""
-    if recs and all((r.get("fit") or {}).get("budget") == "epochs" for r in recs):
-        return " / ".join(f"{n:,}" for n in sorted({round(r["fit"]["epochs"]) for r in recs})) + " epochs"
+    epochs = {as_float((r.get("fit") or {}).get("epochs")) for r in recs}
+    if recs and all(budget_label(r) == "epochs" for r in recs) and all(map(math.isfinite, epochs)):
+        return " / ".join(f"{n:,}" for n in sorted({round(e) for e in epochs})) + " epochs"
     steps = sorted({int((r.get("fit") or {}).get("steps") or 0) for r in recs})
     if steps == [0] or steps == [1]:
         return "built"
@@ -89,10 +90,10 @@ def largest_frames(frames: list[Record], like: list[Record]) -> list[Record]:
 
 def rows(short: list[Record], full: list[Record], frames: list[Record] = (),
          grid: list[Record] = (), epochs: list[Record] = ()) -> list[list[str]]:
-    """The table's rows: per model of the record sets, its short-budget row, its own-budget row (whose frame columns
-    come from the largest images of the same preset at the same fit_steps in `frames`; for a model the shape suite
-    lacks, from `epochs`: gan_epochs, its fit budgeted in epochs, with no column over shapes), and for a model the
-    shape suite lacks its row from `grid` (grid_encodings: equal steps for every family)."""
+    """The table's rows: per model of the record sets, its short-budget row and its own-budget row (whose frame
+    columns come from the largest images of the same preset at the same fit_steps in `frames`); for a model the shape
+    suite lacks, its own-budget row from `epochs` (gan_epochs: its fit budgeted in epochs, no column over shapes)
+    and its row from `grid` (grid_encodings: equal steps for every family)."""
     in_suite = {x.get("model") for x in full}
     grid, epochs = ([r for r in recs if r.get("model") not in in_suite] for recs in (grid, epochs))
     budgets = ((short, "short", False), (full, "own", True), (epochs, "own", False), (grid, "same grid", True))
