@@ -226,6 +226,17 @@ def test_report_command_writes_claims_md(tmp_path):
     assert len(rows) == len(claims.evaluate(records())) and all(line.count(" | ") == 6 for line in rows)
 
 
+def test_a_claims_table_without_out_goes_beside_its_records_not_over_the_committed_one(tmp_path, monkeypatch):
+    for experiment, recs in records().items():
+        for r in recs:
+            write_json_atomic(str(tmp_path / "results" / experiment / r["key"] / "record.json"), r)
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "reports").mkdir()
+    assert report_main(["results", "--claims"]) == 0
+    assert (tmp_path / "results" / "claims.md").read_text().startswith("# ")
+    assert not (tmp_path / "reports" / "claims.md").exists()
+
+
 @pytest.mark.parametrize("ratios,verdict", [((0.90, 1.00, 1.05), claims.CONFIRMED), ((0.50, 0.52, 0.48), claims.REFUTED)])
 def test_the_papers_effect_size_is_confirmed_only_inside_the_measured_interval(ratios, verdict):
     base = (1.0e-3, 1.1e-3, 0.9e-3)

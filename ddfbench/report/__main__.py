@@ -22,9 +22,10 @@ A report comes from one code commit: records from several commits are refused (e
 --allow-mixed-commits, which names the commits at the top of report.md.
 `--status [OVERRIDE ...]` prints which runs of the sweep are done, failed or missing instead
 (ddfbench.report.status).
-`--claims RESULTS [--out reports/claims.md] [--carry reports/claims.md]` writes the paper-claims table
-from the records of every experiment below RESULTS (ddfbench.report.claims); --carry keeps the previous
-table's rows for the claims whose experiments have no records there (marked †).
+`--claims RESULTS [--out RESULTS/claims.md] [--carry reports/claims.md]` writes the paper-claims table
+from the records of every experiment below RESULTS (ddfbench.report.claims), beside them unless --out says
+otherwise (the committed reports/claims.md comes from the committed records: regenerate --from-records); --carry
+keeps the previous table's rows for the claims whose experiments have no records there (marked †).
 """
 
 from __future__ import annotations
@@ -210,7 +211,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--allow-mixed-commits", action="store_true",
                         help="report records from several code commits (named at the top of report.md)")
     parser.add_argument("--claims", action="store_true",
-                        help="write the paper-claims table from every experiment below the records folder")
+                        help="write the paper-claims table from every experiment below the records folder "
+                             "(to RECORDS/claims.md unless --out)")
     parser.add_argument("--carry", metavar="CLAIMS_MD",
                         help="with --claims: keep this previous claims.md's rows for claims without records")
     parser.add_argument("--status", nargs="*", metavar="OVERRIDE",
@@ -233,7 +235,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.claims:
         from ddfbench.report.claims import write_claims
 
-        out = args.out or os.path.join("reports", "claims.md")
+        out = args.out or os.path.join(args.records, "claims.md")
         try:
             print(write_claims(args.records, out, args.carry))
         except InputError as exc:

@@ -1,6 +1,6 @@
 """reports/claims.md: each claim of the source papers against what ddfbench measured, with a verdict.
 
-    python -m ddfbench.report --claims results [--out reports/claims.md] [--carry reports/claims.md]
+    python -m ddfbench.report --claims results [--out results/claims.md] [--carry reports/claims.md]
 
 reads the records of results/<experiment>/ (claims.EXPERIMENTS)
 and writes one row per claim: what the paper says, the measured value as mean ± std [95 % t interval] over
