@@ -25,7 +25,7 @@ from scipy import stats as _scipy_stats
 from ddfbench.evaluate.metric_registry import by_name
 from ddfbench.report.across_shapes import bounded, fmt, geometric, holm, ratio, shape_means
 from ddfbench.report.records import Record, no_result, no_result_label, ok_records, shape_name
-from ddfbench.report.stats import LEVEL
+from ddfbench.report.stats import welch_ratio
 from ddfbench.report.tables import pipe_table
 from ddfbench.truth.suite import SUITE_V1
 
@@ -143,24 +143,12 @@ def axis_rows(records: list[Record], tags: pd.DataFrame) -> list[dict[str, Any]]
                 hard = (x < cut) if axis in HARDER_WHEN_LOW else (x > cut)
                 easy = ~hard if axis in HARDER_WHEN_LOW else (x <= cut)
                 if hard.sum() >= 2 and easy.sum() >= 2:
-                    row.update(_welch(y[hard], y[easy]), n_hard=int(hard.sum()), n_easy=int(easy.sum()))
+                    row.update(welch_ratio(y[hard], y[easy]), n_hard=int(hard.sum()), n_easy=int(easy.sum()))
             model_rows.append(row)
         for row, p in zip(model_rows, holm([r["p"] for r in model_rows])):
             row["p_holm"] = p
         rows += model_rows
     return rows
-
-
-def _welch(a: np.ndarray, b: np.ndarray) -> dict[str, float]:
-    """exp of mean(a) - mean(b) with its Welch t 95 % interval, and the two-sided p."""
-    va, vb = a.var(ddof=1) / len(a), b.var(ddof=1) / len(b)
-    diff, se = float(a.mean() - b.mean()), math.sqrt(va + vb)
-    if se == 0:
-        return {"ratio": math.exp(diff)}
-    dof = (va + vb) ** 2 / (va**2 / (len(a) - 1) + vb**2 / (len(b) - 1))
-    half = float(_scipy_stats.t.ppf(0.5 + LEVEL / 2, dof)) * se
-    p = float(2 * _scipy_stats.t.sf(abs(diff) / se, dof))
-    return {"ratio": math.exp(diff), "lo": math.exp(diff - half), "hi": math.exp(diff + half), "p": p}
 
 
 def tags_markdown(tags: pd.DataFrame) -> str:

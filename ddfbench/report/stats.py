@@ -93,3 +93,15 @@ def best_and_ties(means: Sequence[float], intervals: Sequence[tuple[float, float
         return {best: "best"}
     return {i: "tie" for i in [best, *tied]}
 
+
+def welch_ratio(a: np.ndarray, b: np.ndarray, level: float = LEVEL) -> dict[str, float]:
+    """Two unpaired samples of logs, a (n_a,) and b (n_b,): exp(mean(a) - mean(b)) as "ratio" with its Welch t
+    interval ("lo", "hi") and the two-sided "p" (only "ratio" when both samples are constant)."""
+    va, vb = a.var(ddof=1) / len(a), b.var(ddof=1) / len(b)
+    diff, se = float(a.mean() - b.mean()), math.sqrt(va + vb)
+    if se == 0:
+        return {"ratio": math.exp(diff)}
+    dof = (va + vb) ** 2 / (va**2 / (len(a) - 1) + vb**2 / (len(b) - 1))
+    half = float(_scipy_stats.t.ppf(0.5 + level / 2, dof)) * se
+    p = float(2 * _scipy_stats.t.sf(abs(diff) / se, dof))
+    return {"ratio": math.exp(diff), "lo": math.exp(diff - half), "hi": math.exp(diff + half), "p": p}
