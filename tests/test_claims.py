@@ -374,6 +374,10 @@ def test_the_thesis_summary_rows_read_storage_and_the_40_epoch_gan():
         gan = [rec("gan_epochs", "gan_sdf", s, jitter(s, g_cd, spread), family="gan_sdf") for s in SEEDS]
         got = verdicts(records(gan_epochs=gan, representations=representations(3.0) + grid))
         assert got["G's error small against the grid SDF's"] == verdict, (g_cd, spread)
+    one = [rec("gan_epochs", "gan_sdf", 0, 1.5e-4, family="gan_sdf")]  # one run: no interval, not separable
+    (row,) = [c for c in claims.evaluate(records(gan_epochs=one, representations=representations(3.0) + grid))
+              if c.claim == "G's error small against the grid SDF's"]
+    assert row.verdict == claims.NOT_SEPARABLE and "10× (no interval" in row.measured
 
 
 def grid_encodings(grid_gap, mlp_gap=10.0):
