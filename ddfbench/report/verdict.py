@@ -28,7 +28,15 @@ from ddfbench.core.errors import InputError
 from ddfbench.evaluate.metric_registry import by_name
 from ddfbench.report import compact
 from ddfbench.report.across_shapes import fmt, geometric
-from ddfbench.report.records import Record, as_float, at_largest_image, no_result, ok_records, shape_name
+from ddfbench.report.records import (
+    NOT_CONVERGED,
+    Record,
+    as_float,
+    at_largest_image,
+    no_result,
+    ok_records,
+    shape_name,
+)
 from ddfbench.report.shape_suite import cells, cells_without_result
 from ddfbench.report.stats import summarize_values
 from ddfbench.report.tables import budget_label, pipe_table
@@ -111,7 +119,7 @@ def rows(short: list[Record], full: list[Record], frames: list[Record] = (),
             failed = sum(no_result(r) for r in mine)
             if failed:
                 steps = sorted({(r.get("fit") or {}).get("steps") for r in mine})
-                how = "not converged" if failed == len(mine) else "no result, not ranked"
+                how = NOT_CONVERGED if failed == len(mine) else "no result, not ranked"
                 out.append([model, budget, f"{how} ({failed} of {len(mine)} runs, steps {steps})"]
                            + ["–"] * (len(HEADER) - 3))
                 continue
