@@ -210,7 +210,8 @@ def test_a_killed_run_rerun_goes_on_from_its_checkpoint_and_the_record_says_so(t
     assert not [f for _, _, files in os.walk(tmp_path) for f in files if f.startswith("fit_checkpoint")]
 
 
-def test_a_run_that_fails_after_its_fit_keeps_the_checkpoint_and_its_rerun_does_not_train_again(tmp_path, monkeypatch):
+def _failed_after_its_fit(tmp_path, monkeypatch) -> dict:
+    """A 40-step run whose measuring fails (a full disk) after its fit ended; its config."""
     with initialize_config_dir(CONF_DIR, version_base="1.3"):
         cfg = OmegaConf.to_container(compose("config", overrides=[*TINY[1:], "train.max_steps=40", "eval.noise_floor=false",
                                                                   f"out_dir={tmp_path}"]), resolve=True)
@@ -223,7 +224,20 @@ def test_a_run_that_fails_after_its_fit_keeps_the_checkpoint_and_its_rerun_does_
         failed = runner.run(cfg)
     assert failed["status"] == "failed" and failed["fit"]["status"] == "ok"
     assert [f for _, _, files in os.walk(tmp_path) for f in files if f == FILE]
+    return cfg
+
+
+def test_a_run_that_fails_after_its_fit_keeps_the_checkpoint_and_its_rerun_does_not_train_again(tmp_path, monkeypatch):
+    cfg = _failed_after_its_fit(tmp_path, monkeypatch)
     rerun = runner.run(cfg)
     assert rerun["status"] == "ok" and rerun["fit"]["resumed_at"] == [40]
     assert rerun["env"]["glibc_heap_kept"] is (platform.libc_ver()[0] == "glibc")  # the record says how it ran
     assert not [f for _, _, files in os.walk(tmp_path) for f in files if f == FILE]
+
+
+def test_a_forced_rerun_of_a_run_that_failed_after_its_fit_fits_anew(tmp_path, monkeypatch):
+    cfg = _failed_after_its_fit(tmp_path, monkeypatch)
+    forced = runner.run({**cfg, "force": True})
+    assert forced["status"] == "ok" and forced["fit"]["steps"] == 40
+    assert "resumed_at" not in forced["fit"]  # the kept checkpoint was deleted, not resumed
+    assert not [f for _, _, files in os.walk(tmp_path) for f in files if f.startswith("fit_checkpoint")]

@@ -79,9 +79,10 @@ def test_regenerate_rebuilds_a_remeasurement_and_fails_on_a_hand_edited_table(tm
     assert "| 2 | 50" in md.read_text()  # rebuilt in place from the rows
 
 
-def test_a_stale_table_the_rebuild_does_not_write_is_a_difference(tmp_path, capsys):
+def test_a_stale_table_the_rebuild_does_not_write_is_a_difference_but_the_folders_readme_is_not(tmp_path, capsys):
     folder = tmp_path / "r"
     measured.write(str(folder), HEAD, edge_rows())
+    (folder / "README.md").write_text("what these rows are, written by hand\n")
     (folder / "paired.md").write_text("left by an earlier --store-as run into this folder\n")
     readme = str(tmp_path / "none.md")
     assert regenerate_main(["--from-records", "--check", "--reports", str(tmp_path), "--readme", readme]) == 1

@@ -111,10 +111,11 @@ def rebuild(folder: str, into: str, draw: bool = True) -> None:
 def differences(committed: str, rebuilt: str, whole: bool = False) -> list[str]:
     """The text files (COMPARED) the rebuild wrote that differ from the committed ones or are not committed, by
     name (other files of the folder, such as a README.md or another tool's table, are not the report's); whole: the
-    rebuild writes the whole folder (a re-measurement's), so a committed text file it did not write differs too."""
+    rebuild writes the whole folder (a re-measurement's), so a committed text file it did not write differs too,
+    but for its README.md (written by hand, about the folder)."""
     names = {f for f in os.listdir(rebuilt) if f.endswith(COMPARED) and f != STATUS_FILE}
     if whole:
-        names |= {f for f in os.listdir(committed) if f.endswith(COMPARED)}
+        names |= {f for f in os.listdir(committed) if f.endswith(COMPARED) and f != "README.md"}
     return sorted(n for n in names if not (os.path.isfile(os.path.join(committed, n))
                                            and os.path.isfile(os.path.join(rebuilt, n))
                                            and filecmp.cmp(os.path.join(committed, n), os.path.join(rebuilt, n),
