@@ -156,7 +156,8 @@ def test_launcher_records_equal_the_serial_run(serial, tmp_path, launcher):
     serial_dir, expected = serial
     if launcher == "ray" and (why := ray_can_start()):
         pytest.skip(f"a local Ray instance cannot start here: {why}")
-    launch(tmp_path, f"hydra/launcher={launcher}", *(RAY_LOCAL if launcher == "ray" else []))
+    options = [f"hydra/launcher={launcher}", *(RAY_LOCAL if launcher == "ray" else [])]
+    launch(tmp_path, *options)
     got = by_key(tmp_path)
     assert set(got) == set(expected)
     for key, rec in got.items():
@@ -173,6 +174,10 @@ def test_launcher_records_equal_the_serial_run(serial, tmp_path, launcher):
     assert not os.path.exists(os.path.join(str(tmp_path), ".cache", "datasets"))
     st = sweep_status(os.path.join(str(tmp_path), "smoke"))
     assert st.complete and {j.key for j in st.done} == set(expected)
+    if launcher != "local_parallel":  # submitted again (docs/usage.md): every job finds its ok record and ends at once
+        states = {key: file_state(os.path.join(rec["_dir"], "record.json")) for key, rec in got.items()}
+        launch(tmp_path, *options)
+        assert {key: file_state(os.path.join(rec["_dir"], "record.json")) for key, rec in by_key(tmp_path).items()} == states
 
 
 # --- SIGKILL part way, then re-launch ------------------------------------------------------------
