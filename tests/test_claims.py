@@ -378,6 +378,7 @@ def test_the_thesis_summary_rows_read_storage_and_the_40_epoch_gan():
     (row,) = [c for c in claims.evaluate(records(gan_epochs=one, representations=representations(3.0) + grid))
               if c.claim == "G's error small against the grid SDF's"]
     assert row.verdict == claims.NOT_SEPARABLE and "10× (no interval" in row.measured
+    assert row.measured.endswith("; 2000 points")  # the records' evaluation point count
 
 
 def grid_encodings(grid_gap, mlp_gap=10.0):
@@ -455,6 +456,7 @@ def test_the_plateau_row_gives_how_far_the_gan_s_error_fell_between_its_last_two
     def gan(seed, fell_to, before=4e-4, widest_f=0.9):
         r = rec("gan_epochs", "gan_sdf", seed, 1e-4, family="gan_sdf")
         r["metrics"]["fscore"] = {"0.02": widest_f}
+        r["config"]["train"] = {"probe_points": 30000}
         r["fit"] = {"steps": 3000, "epochs": 40.0, "probes": [  # out of step order, as a resumed fit may write them
             {"step": 3000, "chamfer_l2": 4e-4 * fell_to}, {"step": 300, "chamfer_l2": 1e-2},
             {"step": 1000, "chamfer_l2": before}]}
@@ -466,8 +468,9 @@ def test_the_plateau_row_gives_how_far_the_gan_s_error_fell_between_its_last_two
     assert row([]).verdict == claims.NO_RECORDS and row([]).measured == "–"
     halved = row([gan(s, jitter(s, 0.5)) for s in SEEDS])
     assert halved.verdict == claims.NOT_TESTABLE  # no probe after the 40th epoch
-    assert "(epochs 13.3 to 40): 0.5× [" in halved.measured and halved.measured.endswith("(n=3 runs)")
-    assert "(epochs 13.3 to 40): 0.9× [" in row([gan(s, jitter(s, 0.9)) for s in SEEDS]).measured
+    assert "(epochs 13.3 to 40, probes on 30000 points): 0.5× [" in halved.measured
+    assert halved.measured.endswith("(n=3 runs)")
+    assert "(epochs 13.3 to 40, probes on 30000 points): 0.9× [" in row([gan(s, jitter(s, 0.9)) for s in SEEDS]).measured
     vanished = [gan(s, 0.5) for s in SEEDS[:2]] + [gan(2, 0.5, before=8.64)]  # no surface at 13.3 epochs: the penalty
     assert row(vanished).measured.endswith("0.5× [0.5, 0.5] (n=2 runs); 1 run left out "
                                            "(a probe without a surface or an epoch count)")

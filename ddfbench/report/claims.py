@@ -606,7 +606,9 @@ def last_stretch(recs: list[dict[str, Any]]) -> str:
     left_out = len(ok_records(recs)) - len(ratios)
     epochs = ", ".join(f"{a:g} to {b:g}" for a, b in sorted(spans))
     fell = _over_shapes(across_shapes.geometric(ratios), "runs")
-    return (f"CD-L2 at the last probe over the one before (epochs {epochs}): {fell}"
+    points = "/".join(str(n) for n in sorted({((r.get("config") or {}).get("train") or {}).get("probe_points")
+                                              for r in ok_records(recs)} - {None})) or "?"
+    return (f"CD-L2 at the last probe over the one before (epochs {epochs}, probes on {points} points): {fell}"
             + (f"; {left_out} run{'s' if left_out > 1 else ''} left out (a probe without a surface or an epoch count)"
                if left_out else ""))
 
@@ -718,7 +720,8 @@ def thesis_summary(records: Records) -> list[Claim]:
                  f"{geo:.3g}× (no interval: n 1 or no spread)")
         out.append(Claim("G's error small against the grid SDF's", src, paper,
                          f"CD×10³ G at its epochs {_interval(a)}, grid SDF {_interval(b)}: ratio of geometric means "
-                         f"{ratio}", "`gan_epochs` (bunny) and the grid SDF's bunny runs", verdict,
+                         f"{ratio}; {_n_points(gan + grid_runs)} points", "`gan_epochs` (bunny) and the grid SDF's "
+                         "bunny runs", verdict,
                          f"'Small' read as at most {SMALL_ERROR:g}× the grid SDF's chamfer (the thesis gives no "
                          "number): confirmed when the ratio's interval lies at or below it, refuted when above "
                          "(geometric means over seeds, Welch t interval of the difference of mean logs)."))
