@@ -46,6 +46,17 @@ def test_the_compact_file_writes_the_machines_out_dir_as_a_placeholder(results, 
     assert "/work/res" not in gzip.open(path, "rt").read()
 
 
+def test_the_compact_file_writes_a_package_samples_install_path_as_its_package_and_file(results, tmp_path):
+    """Records of older code named the bunny by the machine's pymeshlab install; today's records name the sample."""
+    first = compact.load_records(str(results))[0]
+    installed = "/work/main/.venv/lib/python3.11/site-packages/pymeshlab/tests/sample_meshes/rangemaps/face000.ply"
+    old = {**first, "shape": {**first["shape"], "name": "range_scan", "source": installed}}
+    mine = {**first, "key": "f" * 16, "shape": {**first["shape"], "source": "/home/me/part.ply"}}  # a user's file
+    back = {r["key"]: r for r in compact.read_compact(compact.write_compact([old, mine], str(tmp_path / "a.jsonl.gz")))}
+    assert back[first["key"]]["shape"] == {**old["shape"], "source": "pymeshlab sample rangemaps/face000.ply"}
+    assert back["f" * 16]["shape"]["source"] == "/home/me/part.ply"  # as given: the user named it so
+
+
 def test_a_line_that_is_not_a_record_is_named_and_left_out(tmp_path, capsys):
     path = tmp_path / "r.jsonl.gz"
     with gzip.open(path, "wt") as fh:

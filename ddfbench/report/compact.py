@@ -3,7 +3,9 @@
 
 A compact record is the record.json as written (metrics, costs, fit curves and probes, config, environment), less
 the run folder it was read from and with the machine's folder in its `out_dir=` override written as `<out_dir>` (as
-the reports write it: a path of the machine that ran it means nothing on a clone); the run folder's artifacts
+the reports write it: a path of the machine that ran it means nothing on a clone), and a package sample's install
+path in `shape.source` (records of code before the shapes wrote it so) as the package and file name, as records now
+write it (`pymeshlab sample bunny.obj`); the run folder's artifacts
 (meshes, renders, the model) stay behind, so what needs them (the gallery, the re-measuring tools) is not rebuilt
 from this file. The file is deterministic: the
 records sorted by (experiment, key), keys sorted, gzip's timestamp 0, so one set of records gives one file.
@@ -29,11 +31,16 @@ from ddfbench.run.runs import RECORD_FILE, SCHEMA_VERSION, find_records, record_
 FILE = "records.jsonl.gz"
 KEY = re.compile(r"[0-9a-f]{16}")  # runs.config_key
 OUT_DIR = "out_dir="
+SAMPLE = re.compile(r".*/site-packages/pymeshlab/tests/sample_meshes/(.+)$")  # truth.catalog's sample folder
 
 
 def portable(rec: dict[str, Any]) -> dict[str, Any]:
-    """The record less its run folder (`_dir`), its `out_dir=` override written as `out_dir=<out_dir>`."""
+    """The record less its run folder (`_dir`), its `out_dir=` override written as `out_dir=<out_dir>`, a pymeshlab
+    sample's install path in `shape.source` as `pymeshlab sample <file>`."""
     row = {k: v for k, v in rec.items() if k != "_dir"}
+    shape = row.get("shape")
+    if isinstance(shape, dict) and isinstance(shape.get("source"), str) and (m := SAMPLE.match(shape["source"])):
+        row["shape"] = {**shape, "source": f"pymeshlab sample {m.group(1)}"}
     if isinstance(row.get("overrides"), list):
         row["overrides"] = [f"{OUT_DIR}<out_dir>" if isinstance(o, str) and o.startswith(OUT_DIR) else o
                             for o in row["overrides"]]
