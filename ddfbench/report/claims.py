@@ -84,8 +84,17 @@ class Claim:
     convention: str = ""
 
 
-def _n_points(records: list[dict[str, Any]]) -> str:
-    ns = sorted({(r.get("metrics") or {}).get("n_points") for r in ok_records(records)} - {None})
+def _final_points(rec: dict[str, Any]) -> Any:
+    return (rec.get("metrics") or {}).get("n_points")
+
+
+def _probe_points(rec: dict[str, Any]) -> Any:
+    return ((rec.get("config") or {}).get("train") or {}).get("probe_points")
+
+
+def _n_points(records: list[dict[str, Any]], count: Callable[[dict[str, Any]], Any] = _final_points) -> str:
+    """The point counts of the ok records (default: the final evaluation's), "/"-joined; "?" when none has one."""
+    ns = sorted({count(r) for r in ok_records(records)} - {None})
     return "/".join(str(n) for n in ns) or "?"
 
 
@@ -606,9 +615,8 @@ def last_stretch(recs: list[dict[str, Any]]) -> str:
     left_out = len(ok_records(recs)) - len(ratios)
     epochs = ", ".join(f"{a:g} to {b:g}" for a, b in sorted(spans))
     fell = _over_shapes(across_shapes.geometric(ratios), "runs")
-    points = "/".join(str(n) for n in sorted({((r.get("config") or {}).get("train") or {}).get("probe_points")
-                                              for r in ok_records(recs)} - {None})) or "?"
-    return (f"CD-L2 at the last probe over the one before (epochs {epochs}, probes on {points} points): {fell}"
+    return (f"CD-L2 at the last probe over the one before (epochs {epochs}, probes on {_n_points(recs, _probe_points)} "
+            f"points): {fell}"
             + (f"; {left_out} run{'s' if left_out > 1 else ''} left out (a probe without a surface or an epoch count)"
                if left_out else ""))
 
