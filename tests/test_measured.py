@@ -69,7 +69,8 @@ def test_regenerate_rebuilds_a_remeasurement_and_fails_on_a_hand_edited_table(tm
     assert "1 re-measurements of runs' artifacts (meshes, networks, renders) from the rows they measured" in text
     assert f"| {index.FROM_ROWS} |" in text
     assert regenerate_main(["--from-records", "--check", "--reports", str(tmp_path), "--readme", readme]) == 0
-    assert "and 1 re-measurement(s) with their measured rows: 0 file(s) differ" in capsys.readouterr().out
+    assert "1 re-measurement(s) with their measured rows and 0 tuning studies with their trial tables: 0 file(s) differ" \
+        in capsys.readouterr().out
     md = folder / "table.md"
     md.write_text(md.read_text().replace("| 2 | 50", "| 2 | 51"))
     assert regenerate_main(["--from-records", "--check", "--reports", str(tmp_path), "--readme", readme]) == 1

@@ -95,7 +95,7 @@ def test_without_the_extra_the_tune_experiment_is_one_line(monkeypatch):
 
 @pytest.mark.slow
 def test_a_study_runs_reports_and_resumes_from_its_records(tmp_path):
-    from ddfbench.report.tune import write
+    from ddfbench.report.tune import rebuild, write
 
     cmd = [sys.executable, "-m", "ddfbench", "+experiment=tune", "model=neural_sdf", "hydra.sweeper.n_trials=3",
            "shape.name=sphere", "train.max_seconds=0.5", "eval.n_points=1000", "eval.mesh_resolution=16",
@@ -124,3 +124,6 @@ def test_a_study_runs_reports_and_resumes_from_its_records(tmp_path):
     assert f"{csv[csv['kind'] == 'trial']['objective'].min():.4g}" in best
     assert f"same budget: CD-L2 x10^3 {csv[csv['kind'] == 'preset']['objective'].iloc[0]:.4g}" in best
     assert (tmp_path / "report" / "tune.png").stat().st_size > 0
+    rebuild(str(tmp_path / "report"), str(tmp_path / "rebuilt"), draw=False)  # from trials.csv and study.json alone
+    for name in ("trials.csv", "trials.md", "best.md", "space.md"):
+        assert (tmp_path / "rebuilt" / name).read_bytes() == (tmp_path / "report" / name).read_bytes(), name

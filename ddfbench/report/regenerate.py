@@ -2,8 +2,9 @@
 `python -m ddfbench.report.regenerate --from-records [--reports DIR] [--check]`
 
 --from-records rebuilds every report below --reports that holds its compact records (records.jsonl.gz) from
-those alone, with the options it was written with (report_options.json), and every re-measurement's tables from
-its measured rows (measured.jsonl.gz, ddfbench.report.measured); then <reports>/claims.md from the records
+those alone, with the options it was written with (report_options.json), every re-measurement's tables from
+its measured rows (measured.jsonl.gz, ddfbench.report.measured) and every tuning study's from its trials table
+and study.json (ddfbench.report.tune); then <reports>/claims.md from the records
 (ddfbench.report.claims), <reports>/index.md (every report folder with its commit and whether it regenerates,
 ddfbench.report.index) and the verdict table (reports/verdict.md and the README's block, ddfbench.report.verdict),
 running no fit and measuring nothing. --check writes into a scratch folder instead and exits 1 naming each committed
@@ -127,13 +128,17 @@ def from_records(reports: str, check: bool, readme: str | None = None) -> int:
     verdict table (reports/verdict.md and the block of `readme`, when it has the markers)."""
     folders = reports_with_records(reports)
     remeasured = [f for f in measured.folders(reports) if f not in folders]  # a report's records come first
-    if not folders and not remeasured:
-        print(f"ddfbench.report.regenerate: no {compact.FILE} or {measured.FILE} below {reports}", file=sys.stderr)
+    studies = [f for f in tune_report.folders(reports) if f not in folders + remeasured]
+    if not folders and not remeasured and not studies:
+        print(f"ddfbench.report.regenerate: no {compact.FILE}, {measured.FILE} or {tune_report.STUDY_FILE} below "
+              f"{reports}", file=sys.stderr)
         return 2
     differing, unreadable = [], 0
-    for folder in folders + remeasured:
-        rows = folder in remeasured
-        remake = measured.rebuild if rows else lambda src, into: rebuild(src, into, draw=not check)
+    for folder in folders + remeasured + studies:
+        rows = folder not in folders  # a re-measurement's or a study's: the rebuild writes the whole folder
+        remake = (measured.rebuild if folder in remeasured
+                  else (lambda src, into: tune_report.rebuild(src, into, draw=not check)) if folder in studies
+                  else (lambda src, into: rebuild(src, into, draw=not check)))
         try:
             if not check:
                 remake(folder, folder)
@@ -164,8 +169,9 @@ def from_records(reports: str, check: bool, readme: str | None = None) -> int:
     for path in differing:
         print(f"ddfbench.report.regenerate: {path} differs from its rebuild from its records", file=sys.stderr)
     if check:
-        print(f"checked {len(folders)} report(s) with records and {len(remeasured)} re-measurement(s) with their "
-              f"measured rows: {len(differing)} file(s) differ", flush=True)
+        print(f"checked {len(folders)} report(s) with records, {len(remeasured)} re-measurement(s) with their "
+              f"measured rows and {len(studies)} tuning stud{'y' if len(studies) == 1 else 'ies'} with their trial "
+              f"tables: {len(differing)} file(s) differ", flush=True)
     code = 2 if unreadable else 1 if differing else 0
     if readme and os.path.isfile(readme) and verdict.START in open(readme).read():  # the README's generated block
         code = max(code, verdict.main(["--reports", reports, "--readme", readme, *(["--check"] if check else [])]))

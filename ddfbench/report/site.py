@@ -167,6 +167,7 @@ def provenance_line(found: index.Provenance) -> str:
     """A report folder's runs, code commit(s) and whether it regenerates from committed files, in words."""
     where = {index.REGENERATES: "it regenerates from its committed records",
              index.FROM_ROWS: "a re-measurement of the runs' artifacts; it regenerates from the rows it measured",
+             index.FROM_TRIALS: "a tuning study; it regenerates from its committed trial table",
              index.ARTIFACTS: "a re-measurement of the runs' artifacts, which stay with the runs"}.get(
         found.regenerates, "its records are not committed, so its table cannot be recomputed from the repository")
     return (f"{found.runs if found.runs is not None else 'an unknown number of'} runs of code "

@@ -1,20 +1,28 @@
 """`python -m ddfbench.report.tune RESULTS/tune --out reports/tune`: the tuning studies (`+experiment=tune`).
 
 Writes into --out, from the records alone:
-  trials.md, trials.csv  every trial per model in the order run: the values drawn, the objective
+  trials.csv, trials.md  every trial per model in the order run: the values drawn, the objective
                          (chamfer L2 x10^3 of the final reconstruction; empty: the penalty), steps, fit s;
                          a tune record with no drawn values is the preset itself at the same budget
                          (`kind` preset: `+experiment=tune model=<m> hydra.mode=RUN`)
+  study.json             what the tables read besides the trials: the provenance line, each model's search space
+                         as conf/model/<model>.yaml declared it and the preset's values (its preset run's config;
+                         without one, the YAML's)
   best.md                per model: trials, fit seconds per trial, the best trial's objective and values
                          beside the preset's own and the preset's objective (equal budgets: a study whose
                          trial count or fit seconds differ from the others' is named there)
-  space.md               each model's search space as conf/model/<model>.yaml declares it
+  space.md               each model's search space, from study.json
   tune.png               objective per trial and the best so far, one line per model
+
+trials.csv and study.json are the study's compact record: `rebuild` (`regenerate --from-records`) writes the other
+files from them alone, so a study regenerates on a fresh clone although a later commit changes a preset or a space
+(a wall-clock study cannot be run again to the same trials).
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import math
 import os
 import sys
@@ -23,22 +31,30 @@ from typing import Any
 import pandas as pd
 
 from ddfbench.core import plugins
+from ddfbench.core.errors import InputError
 from ddfbench.evaluate.metric_registry import objective_value
 from ddfbench.fit.tune import search_space
 from ddfbench.run.runs import code_commits, find_records
 
 OBJECTIVE = "chamfer_l2"  # conf/experiment/tune.yaml `objective`
 SCALE = 1e3  # printed as x10^3, as in every report table
+TRIALS_FILE = "trials.csv"
+STUDY_FILE = "study.json"
+COLUMNS = ("model", "kind", "trial", "objective", "status", "steps", "fit_s", "max_seconds")  # besides the drawn values
+
+
+def _drawn(record: dict[str, Any], space: dict[str, Any]) -> dict[str, str]:
+    """{config path: value as overridden} of the record's overrides that its model's search space draws."""
+    return dict(o.split("=", 1) for o in record.get("overrides") or [] if o.split("=", 1)[0] in space)
 
 
 def trials(records: list[dict[str, Any]]) -> pd.DataFrame:
     """One row per run: model, kind (trial | preset), trial (0-based by start time; preset: NaN), each drawn
-    value, objective, steps, fit_s, max_seconds."""
+    value (as overridden, a string), objective, steps, fit_s, max_seconds."""
     rows = []
     for rec in sorted(records, key=lambda r: (str(r.get("model")), str(r.get("started")))):
         model = str(rec.get("model"))
-        space = search_space(model)
-        drawn = dict(o.split("=", 1) for o in rec.get("overrides") or [] if o.split("=", 1)[0] in space)
+        drawn = _drawn(rec, search_space(model))
         fit = rec.get("fit") or {}
         rows.append({"model": model, "kind": "trial" if drawn else "preset", **drawn,
                      "objective": objective_value(rec, OBJECTIVE) * SCALE, "status": rec.get("status"), "steps": fit.get("steps"),
@@ -51,26 +67,43 @@ def trials(records: list[dict[str, Any]]) -> pd.DataFrame:
     return df
 
 
-def _preset_value(model: str, path: str) -> Any:
-    node: Any = plugins.model_defaults(model)
+def _value_at(config: Any, path: str) -> Any:
+    """The value at a search-space path (`model.<key>[.<key>]`) of a model config; None where it has none."""
     for key in path.split(".")[1:]:
-        node = node.get(key) if isinstance(node, dict) else None
-    return node
+        config = config.get(key) if isinstance(config, dict) else None
+    return config
 
 
 def provenance(records: list[dict[str, Any]], records_dir: str) -> str:
-    """One line: how many records, from where, which code commits, threads and CPU they ran with."""
+    """One line: how many records, from where (`<out_dir>/<folder name>`: a machine's folder means nothing on a
+    clone), which code commits, threads and CPU they ran with."""
     env = [r.get("env") or {} for r in records]
     commits = [sha[:7] for sha in code_commits(records)]
     threads = sorted({str(e.get("threads")) for e in env})
     cpus = sorted({str(e.get("cpu")) for e in env})
-    return (f"{len(records)} records from `{records_dir}` (code {', '.join(commits)}; threads {', '.join(threads)}; "
+    where = f"<out_dir>/{os.path.basename(os.path.normpath(records_dir))}"
+    return (f"{len(records)} records from `{where}` (code {', '.join(commits)}; threads {', '.join(threads)}; "
             f"cpu {', '.join(cpus)}).")
 
 
-def best(df: pd.DataFrame, header: str = "") -> list[str]:
+def study(records: list[dict[str, Any]], records_dir: str, models: list[str]) -> dict[str, Any]:
+    """study.json: {"provenance": line, "spaces": {model: {path: [kind, values]}}, "presets": {model: {path:
+    value}}}, the presets' values from each model's preset run (its record's config), else from its YAML."""
+    spaces = {model: search_space(model) for model in models}
+    presets = {}
+    for model, space in spaces.items():
+        run = next((r for r in records if str(r.get("model")) == model and not _drawn(r, space)), None)
+        config = ((run.get("config") or {}).get("model") if run else None) or plugins.model_defaults(model)
+        presets[model] = {path: _value_at(config, path) for path in space}
+    return {"provenance": provenance(records, records_dir),
+            "spaces": {model: {path: [kind, values] for path, (kind, values) in space.items()}
+                       for model, space in spaces.items()},
+            "presets": presets}
+
+
+def best(df: pd.DataFrame, head: dict[str, Any]) -> list[str]:
     """Markdown lines: per model the best trial, its values beside the preset's, and the budget check."""
-    lines = ["# Best trial per model", "", *([header, ""] if header else [])]
+    lines = ["# Best trial per model", "", head["provenance"], ""]
     studies = df[df["kind"] == "trial"]
     budgets = {m: (len(g), tuple(sorted(set(df.loc[df["model"] == m, "max_seconds"])))) for m, g in studies.groupby("model")}
     if len(set(budgets.values())) > 1:
@@ -87,16 +120,17 @@ def best(df: pd.DataFrame, header: str = "") -> list[str]:
             lines += [f"The preset's own values at the same budget: CD-L2 x10^3 {preset['objective'].iloc[0]:.4g} "
                       f"({int(preset['steps'].iloc[0])} steps).", ""]
         lines += ["| key | best | preset |", "|---|---|---|"]
-        lines += [f"| {path} | {top[path]} | {_preset_value(model, path)} |" for path in search_space(model)]
+        lines += [f"| {path} | {top[path]} | {value} |" for path, value in head["presets"][model].items()]
         lines.append("")
     return lines
 
 
-def space_lines(models: list[str]) -> list[str]:
+def space_lines(spaces: dict[str, dict[str, list[Any]]]) -> list[str]:
+    """Markdown lines: each model's search space, one row per drawn key."""
     lines = ["# Search spaces (conf/model/<model>.yaml, experiments.tune)", ""]
-    for model in models:
+    for model, space in spaces.items():
         lines += [f"## {model}", "", "| key | distribution | values |", "|---|---|---|"]
-        lines += [f"| {p} | {k} | {v} |" for p, (k, v) in search_space(model).items()]
+        lines += [f"| {p} | {k} | {v} |" for p, (k, v) in space.items()]
         lines.append("")
     return lines
 
@@ -122,23 +156,78 @@ def plot(df: pd.DataFrame, path: str) -> None:
     plt.close(fig)
 
 
+def write_tables(out: str, df: pd.DataFrame, head: dict[str, Any], draw: bool = True) -> None:
+    """Write trials.csv, trials.md, best.md, space.md (and with draw, tune.png) of a study into out."""
+    os.makedirs(out, exist_ok=True)
+    df.to_csv(os.path.join(out, TRIALS_FILE), index=False)
+    with open(os.path.join(out, "trials.md"), "w") as fh:
+        for model, group in df.groupby("model"):
+            cols = ["kind", "trial", *head["spaces"][str(model)], "objective", "status", "steps", "fit_s"]
+            fh.write(f"## {model}\n\n{group[cols].to_markdown(index=False, floatfmt='.4g')}\n\n")
+    with open(os.path.join(out, "best.md"), "w") as fh:
+        fh.write("\n".join(best(df, head)) + "\n")
+    with open(os.path.join(out, "space.md"), "w") as fh:
+        fh.write("\n".join(space_lines(head["spaces"])) + "\n")
+    if draw:
+        plot(df, os.path.join(out, "tune.png"))
+
+
+def read(folder: str) -> tuple[pd.DataFrame, dict[str, Any]]:
+    """The trials table and study.json of a study folder, as write_tables takes them (drawn values as strings, as
+    overridden); InputError naming the file that is not one."""
+    path = os.path.join(folder, STUDY_FILE)
+    try:
+        with open(path, encoding="utf-8") as fh:
+            head = json.load(fh)
+    except (OSError, ValueError) as exc:
+        raise InputError(f"{path}: not a readable JSON file ({exc})") from exc
+    if not (isinstance(head, dict) and isinstance(head.get("provenance"), str)
+            and all(isinstance(head.get(key), dict) for key in ("spaces", "presets"))):
+        raise InputError(f"{path}: needs a JSON object with provenance (a string), spaces and presets (objects)")
+    path = os.path.join(folder, TRIALS_FILE)
+    try:
+        drawn = [c for c in pd.read_csv(path, nrows=0).columns if c not in COLUMNS]
+        df = pd.read_csv(path, dtype=dict.fromkeys(drawn, str))
+    except (OSError, ValueError) as exc:
+        raise InputError(f"{path}: not a trials table ({exc})") from exc
+    missing = [c for c in COLUMNS if c not in df.columns]
+    unknown = sorted(set(df["model"]) - set(head["spaces"])) if not missing else []
+    if missing or unknown:
+        raise InputError(f"{path}: " + (f"no column {', '.join(missing)}" if missing else
+                                        f"model {', '.join(map(str, unknown))} has no search space in {STUDY_FILE}"))
+    df["trial"] = df["trial"].astype("Int64")
+    return df, head
+
+
+def rebuild(folder: str, into: str, draw: bool = True) -> None:
+    """Write the tables of a study folder's trials.csv and study.json into `into`, running nothing."""
+    write_tables(into, *read(folder), draw=draw)
+
+
+def holds_study(folder: str) -> bool:
+    """Whether folder holds a study's compact record (trials.csv and study.json)."""
+    return all(os.path.isfile(os.path.join(folder, name)) for name in (TRIALS_FILE, STUDY_FILE))
+
+
+def folders(reports: str) -> list[str]:
+    """Every folder below reports (any depth) that holds a study's compact record, sorted."""
+    return sorted(folder for folder, _, _ in os.walk(reports) if holds_study(folder))
+
+
 def write(records_dir: str, out: str) -> pd.DataFrame:
-    """Write the four files for the records below records_dir; return the trials table."""
+    """Write the study of the records below records_dir into out: its compact record (trials.csv, study.json), then
+    the tables from those as read back, so a rebuild writes the same bytes; return the trials table."""
     records = [r for r in find_records(records_dir) if r.get("experiment") == "tune"]
     if not records:
         raise FileNotFoundError(f"{records_dir}: no records of experiment tune")
     df = trials(records)
     os.makedirs(out, exist_ok=True)
-    df.to_csv(os.path.join(out, "trials.csv"), index=False)
-    with open(os.path.join(out, "trials.md"), "w") as fh:
-        for model, group in df.groupby("model"):
-            cols = ["kind", "trial", *search_space(str(model)), "objective", "status", "steps", "fit_s"]
-            fh.write(f"## {model}\n\n{group[cols].to_markdown(index=False, floatfmt='.4g')}\n\n")
-    with open(os.path.join(out, "best.md"), "w") as fh:
-        fh.write("\n".join(best(df, provenance(records, records_dir))) + "\n")
-    with open(os.path.join(out, "space.md"), "w") as fh:
-        fh.write("\n".join(space_lines(sorted(df["model"].unique()))) + "\n")
-    plot(df, os.path.join(out, "tune.png"))
+    df.to_csv(os.path.join(out, TRIALS_FILE), index=False)
+    with open(os.path.join(out, STUDY_FILE), "w", encoding="utf-8") as fh:
+        json.dump(study(records, records_dir, sorted(df["model"].unique())), fh, indent=1)
+        fh.write("\n")
+    df, head = read(out)
+    write_tables(out, df, head)
     return df
 
 
