@@ -94,7 +94,7 @@ def test_a_stale_table_the_rebuild_does_not_write_is_a_difference_but_the_folder
 
 @pytest.mark.parametrize("meta, rows, says", [
     (json.dumps({**HEAD, "tool": "os"}), None, r"measured\.json: tool 'os' is not one of"),
-    (json.dumps({"tool": "zero_level"}), None, r"measured\.json: needs a JSON object with the strings tool, command"),
+    (json.dumps({"tool": "zero_level"}), None, r"measured\.json: needs a JSON object with tool \(a str\), command \(a str\)"),
     ("[]", None, r"measured\.json: needs a JSON object"),
     ('{"tool": ', None, r"measured\.json: not a readable JSON file"),
     (None, b"not gzip", r"measured\.jsonl\.gz: not measured rows"),

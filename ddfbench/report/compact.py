@@ -47,6 +47,11 @@ def portable(rec: dict[str, Any]) -> dict[str, Any]:
     return row
 
 
+def folders_holding(root: str, *names: str) -> list[str]:
+    """Every folder below root (any depth, root included) that holds every one of the named files, sorted."""
+    return sorted(folder for folder, _, files in os.walk(root) if all(name in files for name in names))
+
+
 def write_jsonl_gz(lines: Iterable[str], path: str) -> str:
     """Write the lines (JSON texts) to path, one a line, gzip'd with timestamp 0 (one content, one file), through a
     temporary file renamed over path (a failure leaves no half-written file); return path."""

@@ -25,8 +25,8 @@ import os
 import sys
 from typing import Any
 
-from ddfbench.core.errors import InputError
-from ddfbench.report.compact import portable, write_jsonl_gz
+from ddfbench.core.errors import InputError, checked_json_object
+from ddfbench.report.compact import folders_holding, portable, write_jsonl_gz
 from ddfbench.run.runs import code_commits, code_sha
 
 FILE = "measured.jsonl.gz"
@@ -73,13 +73,7 @@ def write(out: str, head: dict[str, str], rows: list[dict[str, Any]]) -> str:
 def read(folder: str) -> tuple[dict[str, str], list[dict[str, Any]]]:
     """The header and rows a re-measurement folder holds; InputError naming the file (and line) that is not one."""
     path = os.path.join(folder, META)
-    try:
-        with open(path, encoding="utf-8") as fh:
-            head = json.load(fh)
-    except (OSError, ValueError) as exc:
-        raise InputError(f"{path}: not a readable JSON file ({exc})") from exc
-    if not isinstance(head, dict) or any(not isinstance(head.get(key), str) for key in HEADER):
-        raise InputError(f"{path}: needs a JSON object with the strings {', '.join(HEADER)}")
+    head = checked_json_object(path, dict.fromkeys(HEADER, str))
     if head["tool"] not in TOOLS:
         raise InputError(f"{path}: tool {head['tool']!r} is not one of {TOOLS}")
     path, rows = os.path.join(folder, FILE), []
@@ -109,4 +103,4 @@ def holds_rows(folder: str) -> bool:
 
 def folders(reports: str) -> list[str]:
     """Every folder below reports (any depth) that holds measured rows, sorted."""
-    return sorted(folder for folder, _, _ in os.walk(reports) if holds_rows(folder))
+    return folders_holding(reports, FILE, META)

@@ -94,7 +94,7 @@ COMPARED = (".md", ".csv", ".tex")  # what --check compares byte for byte
 
 def reports_with_records(reports: str) -> list[str]:
     """Every folder below reports (any depth) that holds a compact records file, sorted."""
-    return sorted(folder for folder, _, files in os.walk(reports) if compact.FILE in files)
+    return compact.folders_holding(reports, compact.FILE)
 
 
 def rebuild(folder: str, into: str, draw: bool = True) -> None:
@@ -190,8 +190,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--note", help="first line of each report (default with overrides: 'reduced budget: ...')")
     parser.add_argument("--report-only", action="store_true", help="write the reports from existing records only")
     parser.add_argument("--from-records", action="store_true",
-                        help=f"rebuild every report below --reports from its {compact.FILE} and every "
-                             f"re-measurement from its {measured.FILE}, running and measuring nothing")
+                        help=f"rebuild every report below --reports from its {compact.FILE}, every "
+                             f"re-measurement from its {measured.FILE} and every tuning study from its "
+                             f"{tune_report.TRIALS_FILE} and {tune_report.STUDY_FILE}, running and measuring nothing")
     parser.add_argument("--readme", help="README whose verdict block --from-records rebuilds (default: the README.md "
                                          "beside the --reports folder)")
     parser.add_argument("--check", action="store_true",

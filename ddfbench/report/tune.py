@@ -16,7 +16,8 @@ Writes into --out, from the records alone:
 
 trials.csv and study.json are the study's compact record: `rebuild` (`regenerate --from-records`) writes the other
 files from them alone, so a study regenerates on a fresh clone although a later commit changes a preset or a space
-(a wall-clock study cannot be run again to the same trials).
+(a wall-clock study cannot be run again to the same trials). Writing them reads the search spaces from conf/, so a
+study is written at the code commit it ran at, as every report is.
 """
 
 from __future__ import annotations
@@ -31,9 +32,10 @@ from typing import Any
 import pandas as pd
 
 from ddfbench.core import plugins
-from ddfbench.core.errors import InputError
+from ddfbench.core.errors import InputError, checked_json_object
 from ddfbench.evaluate.metric_registry import objective_value
 from ddfbench.fit.tune import search_space
+from ddfbench.report.compact import folders_holding
 from ddfbench.run.runs import code_commits, find_records
 
 OBJECTIVE = "chamfer_l2"  # conf/experiment/tune.yaml `objective`
@@ -49,7 +51,7 @@ def _drawn(record: dict[str, Any], space: dict[str, Any]) -> dict[str, str]:
 
 
 def trials(records: list[dict[str, Any]]) -> pd.DataFrame:
-    """One row per run: model, kind (trial | preset), trial (0-based by start time; preset: NaN), each drawn
+    """One row per run: model, kind (trial | preset), trial (0-based by start time; preset: <NA>), each drawn
     value (as overridden, a string), objective, steps, fit_s, max_seconds."""
     rows = []
     for rec in sorted(records, key=lambda r: (str(r.get("model")), str(r.get("started")))):
@@ -90,9 +92,9 @@ def study(records: list[dict[str, Any]], records_dir: str, models: list[str]) ->
     """study.json: {"provenance": line, "spaces": {model: {path: [kind, values]}}, "presets": {model: {path:
     value}}}, the presets' values from each model's preset run (its record's config), else from its YAML."""
     spaces = {model: search_space(model) for model in models}
-    presets = {}
+    presets, by_start = {}, sorted(records, key=lambda r: str(r.get("started")))  # the first preset run, as in best.md
     for model, space in spaces.items():
-        run = next((r for r in records if str(r.get("model")) == model and not _drawn(r, space)), None)
+        run = next((r for r in by_start if str(r.get("model")) == model and not _drawn(r, space)), None)
         config = ((run.get("config") or {}).get("model") if run else None) or plugins.model_defaults(model)
         presets[model] = {path: _value_at(config, path) for path in space}
     return {"provenance": provenance(records, records_dir),
@@ -172,29 +174,62 @@ def write_tables(out: str, df: pd.DataFrame, head: dict[str, Any], draw: bool = 
         plot(df, os.path.join(out, "tune.png"))
 
 
+def _head_problem(head: dict[str, Any]) -> str | None:
+    """What makes study.json's spaces and presets unusable, else None."""
+    for model, space in head["spaces"].items():
+        if not isinstance(space, dict) or any(not (isinstance(d, list) and len(d) == 2 and isinstance(d[0], str)
+                                                   and isinstance(d[1], list)) for d in space.values()):
+            return f"spaces.{model} must map each key to [distribution, [values]]"
+        if not isinstance(head["presets"].get(model), dict) or list(head["presets"][model]) != list(space):
+            return f"presets.{model} must give a value for each key of spaces.{model}, in its order"
+    extra = sorted(set(head["presets"]) - set(head["spaces"]))
+    return f"presets.{extra[0]} has no search space" if extra else None
+
+
+def _trials_problem(df: pd.DataFrame, spaces: dict[str, Any]) -> str | None:
+    """What makes a trials table unusable with these spaces, else None."""
+    missing = [c for c in COLUMNS if c not in df.columns]
+    if missing:
+        return f"no column {', '.join(missing)}"
+    bad_kind = sorted(set(map(str, df["kind"])) - {"trial", "preset"})
+    if bad_kind:
+        return f"kind {bad_kind[0]!r} is not trial or preset"
+    for model in sorted(set(map(str, df["model"])) | set(spaces)):
+        rows = df[df["model"].astype(str) == model]
+        trial_rows = rows[rows["kind"] == "trial"]
+        if model not in spaces:
+            return f"model {model} has no search space in {STUDY_FILE}"
+        absent = [c for c in spaces[model] if c not in df.columns]
+        if absent:
+            return f"no column {', '.join(absent)} of {model}'s space"
+        if trial_rows.empty:
+            return f"model {model} has no trial row"
+        numbers = pd.to_numeric(trial_rows["trial"], errors="coerce")
+        if numbers.isna().any() or (numbers % 1 != 0).any() or numbers.duplicated().any():
+            return f"{model}'s trial numbers must be whole, given and distinct"
+        if rows.loc[rows["kind"] != "trial", "trial"].notna().any():
+            return f"{model}'s preset rows must leave trial empty"
+    not_numbers = [c for c in ("objective", "steps", "fit_s", "max_seconds") if not pd.api.types.is_numeric_dtype(df[c])]
+    return f"column {', '.join(not_numbers)} must hold numbers" if not_numbers else None
+
+
 def read(folder: str) -> tuple[pd.DataFrame, dict[str, Any]]:
-    """The trials table and study.json of a study folder, as write_tables takes them (drawn values as strings, as
-    overridden); InputError naming the file that is not one."""
+    """The trials table and study.json of a study folder, as write_tables takes them (drawn values as the strings
+    overridden; only an empty cell is missing); InputError naming the file that is not one."""
     path = os.path.join(folder, STUDY_FILE)
-    try:
-        with open(path, encoding="utf-8") as fh:
-            head = json.load(fh)
-    except (OSError, ValueError) as exc:
-        raise InputError(f"{path}: not a readable JSON file ({exc})") from exc
-    if not (isinstance(head, dict) and isinstance(head.get("provenance"), str)
-            and all(isinstance(head.get(key), dict) for key in ("spaces", "presets"))):
-        raise InputError(f"{path}: needs a JSON object with provenance (a string), spaces and presets (objects)")
+    head = checked_json_object(path, {"provenance": str, "spaces": dict, "presets": dict})
+    problem = _head_problem(head)
+    if problem:
+        raise InputError(f"{path}: {problem}")
     path = os.path.join(folder, TRIALS_FILE)
     try:
         drawn = [c for c in pd.read_csv(path, nrows=0).columns if c not in COLUMNS]
-        df = pd.read_csv(path, dtype=dict.fromkeys(drawn, str))
+        df = pd.read_csv(path, dtype=dict.fromkeys(drawn, str), keep_default_na=False, na_values=[""])
     except (OSError, ValueError) as exc:
         raise InputError(f"{path}: not a trials table ({exc})") from exc
-    missing = [c for c in COLUMNS if c not in df.columns]
-    unknown = sorted(set(df["model"]) - set(head["spaces"])) if not missing else []
-    if missing or unknown:
-        raise InputError(f"{path}: " + (f"no column {', '.join(missing)}" if missing else
-                                        f"model {', '.join(map(str, unknown))} has no search space in {STUDY_FILE}"))
+    problem = _trials_problem(df, head["spaces"])
+    if problem:
+        raise InputError(f"{path}: {problem}")
     df["trial"] = df["trial"].astype("Int64")
     return df, head
 
@@ -211,7 +246,7 @@ def holds_study(folder: str) -> bool:
 
 def folders(reports: str) -> list[str]:
     """Every folder below reports (any depth) that holds a study's compact record, sorted."""
-    return sorted(folder for folder, _, _ in os.walk(reports) if holds_study(folder))
+    return folders_holding(reports, TRIALS_FILE, STUDY_FILE)
 
 
 def write(records_dir: str, out: str) -> pd.DataFrame:
@@ -227,7 +262,7 @@ def write(records_dir: str, out: str) -> pd.DataFrame:
         json.dump(study(records, records_dir, sorted(df["model"].unique())), fh, indent=1)
         fh.write("\n")
     df, head = read(out)
-    write_tables(out, df, head)
+    write_tables(out, df, head)  # trials.csv again, from the table as read back: what a rebuild writes
     return df
 
 
