@@ -2,7 +2,7 @@
 and its seed<K>/ subfolders, where the seeds were fit in several sessions and reported as they finished
 (reports/gan_epochs_tuned: gan_sdf_tuned at the thesis' 40 epochs, code 332b432):
 
-  runs.csv           the folder's own report (there: seeds 0, 1 and 2)
+  runs.csv           the folder's own report (there: seeds 0-3)
   seed<K>/runs.csv   seed K's own one-seed report
 
 usage: python -m ddfbench.report.pool_seeds reports/gan_epochs_tuned [--model gan_sdf_tuned] > .../pooled.md
