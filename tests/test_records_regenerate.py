@@ -97,7 +97,9 @@ def test_the_index_says_which_reports_regenerate_and_a_stale_index_fails_the_che
     code = compact.read_compact(str(tmp_path / "rep" / compact.FILE))[0]["env"]["code_sha"][:7]
     assert rows["| [`rep/`](rep/)"].endswith(f"| – | 3 | {code} | yes |")  # two finished runs and the failed one
     assert rows["| [`old/nested/`](old/nested/)"].endswith("| – | 3 | 0123456 | no: records not committed |")
-    assert "1 of 2 report folders regenerate" in (tmp_path / "index.md").read_text()
+    text = (tmp_path / "index.md").read_text()
+    assert "1 of 2 report folders regenerate" in text and "saved no rows" not in text
+    assert "Not regenerating: 1 report of runs whose records stayed on the machine that ran them" in text
     (tmp_path / "old" / "again").mkdir()  # a re-measurement of runs' artifacts
     (tmp_path / "old" / "again" / "table.md").write_text(
         "`python -m ddfbench.report.reevaluate <out_dir>/old --out x`: 3 runs measured again, records of code abcdef0, "
@@ -109,7 +111,12 @@ def test_the_index_says_which_reports_regenerate_and_a_stale_index_fails_the_che
     assert index.provenance(str(tmp_path / "old" / "again")) == index.Provenance(18, [], index.ARTIFACTS)
     shutil.copytree(tmp_path / "rep", tmp_path / "rep2")
     assert regenerate_main(["--from-records", "--reports", str(tmp_path), "--readme", readme]) == 0
-    assert "2 of 4 report folders regenerate" in (tmp_path / "index.md").read_text()
+    assert "2 of 4 report folders regenerate" in (text := (tmp_path / "index.md").read_text())
+    assert "Not regenerating: 1 re-measurement saved no rows, and the artifacts stay with the runs; 1 report of" in text
+    shutil.rmtree(tmp_path / "old")  # every folder left regenerates: the index says nothing is missing
+    assert regenerate_main(["--from-records", "--reports", str(tmp_path), "--readme", readme]) == 0
+    assert "2 of 2 report folders regenerate" in (text := (tmp_path / "index.md").read_text())
+    assert "Not regenerating" not in text
     os.remove(tmp_path / "rep2" / compact.FILE)  # its records go: the committed index no longer says what is true
     capsys.readouterr()
     assert regenerate_main(["--from-records", "--reports", str(tmp_path), "--readme", readme, "--check"]) == 1

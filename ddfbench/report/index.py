@@ -89,6 +89,18 @@ def tiers_of(suite: str, reports: str) -> dict[str, str]:
     return out
 
 
+def not_regenerating(remeasured: int, lost: int) -> str:
+    """The index's sentence on the folders that do not regenerate, by kind; empty when every folder does."""
+    kinds = []
+    if remeasured:
+        kinds.append(f"{remeasured} re-measurement{'s' if remeasured != 1 else ''} saved no rows, and the artifacts "
+                     "stay with the runs")
+    if lost:
+        kinds.append(f"{lost} report{'s' if lost != 1 else ''} of runs whose records stayed on the machine that ran "
+                     "them: the tables cannot be recomputed from this repository")
+    return f" Not regenerating: {'; '.join(kinds)}." if kinds else ""
+
+
 def render_index(reports: str, suite: str = "v1") -> str:
     """The index as Markdown: one row per report folder, the suite's reports first (by tier, as the suite file
     lists them), then the others by name."""
@@ -103,6 +115,7 @@ def render_index(reports: str, suite: str = "v1") -> str:
     from_rows = sum(p.regenerates == FROM_ROWS for p in found.values())
     from_trials = sum(p.regenerates == FROM_TRIALS for p in found.values())
     remeasured = sum(p.regenerates == ARTIFACTS for p in found.values())
+    lost = len(rows) - done - from_rows - from_trials - remeasured
     return "\n".join([
         "# Reports at a glance",
         "",
@@ -110,10 +123,8 @@ def render_index(reports: str, suite: str = "v1") -> str:
         f"{done + from_rows + from_trials} of {len(rows)} report folders regenerate from committed files: {done} "
         f"reports from their records (`records.jsonl.gz`), {from_rows} re-measurements of runs' artifacts (meshes, "
         f"networks, renders) from the rows they measured (`measured.jsonl.gz`), {from_trials} tuning studies from "
-        f"their trial tables (`trials.csv`, `study.json`). {remeasured} re-measurements saved no rows, "
-        "and their artifacts stay with the runs; the others are reports of runs whose records stayed on the machine "
-        "that ran them: their tables cannot be recomputed "
-        f"from this repository. Suite {suite}'s tiers: `conf/suite/{suite}.yaml` (`python -m ddfbench.suite status "
+        f"their trial tables (`trials.csv`, `study.json`).{not_regenerating(remeasured, lost)} "
+        f"Suite {suite}'s tiers: `conf/suite/{suite}.yaml` (`python -m ddfbench.suite status "
         f"{suite}` says which are stale). Timing benches (`bench/`) keep their raw JSON beside each table.",
         "",
         "| report | suite tier | runs | code | regenerates from records |",
