@@ -97,7 +97,7 @@ def not_regenerating(remeasured: int, lost: int) -> str:
                      "stay with the runs")
     if lost:
         kinds.append(f"{lost} report{'s' if lost != 1 else ''} of runs whose records stayed on the machine that ran "
-                     "them: the tables cannot be recomputed from this repository")
+                     "them, so their tables cannot be recomputed from this repository")
     return f" Not regenerating: {'; '.join(kinds)}." if kinds else ""
 
 
