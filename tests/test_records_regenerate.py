@@ -112,7 +112,8 @@ def test_the_index_says_which_reports_regenerate_and_a_stale_index_fails_the_che
     shutil.copytree(tmp_path / "rep", tmp_path / "rep2")
     assert regenerate_main(["--from-records", "--reports", str(tmp_path), "--readme", readme]) == 0
     assert "2 of 4 report folders regenerate" in (text := (tmp_path / "index.md").read_text())
-    assert "Not regenerating: 1 re-measurement saved no rows, and the artifacts stay with the runs; 1 report of runs" in text
+    assert ("Not regenerating: 1 re-measurement saved no rows, and the artifacts stay with the runs; "
+            "1 report of runs") in text
     shutil.rmtree(tmp_path / "old")  # every folder left regenerates: the index says nothing is missing
     assert regenerate_main(["--from-records", "--reports", str(tmp_path), "--readme", readme]) == 0
     assert "2 of 2 report folders regenerate" in (text := (tmp_path / "index.md").read_text())
