@@ -1,8 +1,6 @@
 """Errors a user can act on: one line naming the file or value and what is wrong."""
 
-import json
 import numbers
-from typing import Any
 
 
 class InputError(ValueError):
@@ -26,17 +24,3 @@ def first_line(err: BaseException) -> str:
 def one_line(err: BaseException) -> str:
     """'ExceptionType: first line of its message', for a report or a note."""
     return f"{type(err).__name__}: {first_line(err)}"
-
-
-def checked_json_object(path: str, needs: dict[str, type]) -> dict[str, Any]:
-    """The JSON object in the file at path, with a value of the given type at each key of `needs`; an InputError
-    naming the file when it is unreadable, not JSON or not such an object."""
-    try:
-        with open(path, encoding="utf-8") as fh:
-            found = json.load(fh)
-    except (OSError, ValueError) as exc:
-        raise InputError(f"{path}: not a readable JSON file ({first_line(exc)})") from exc
-    if not isinstance(found, dict) or any(not isinstance(found.get(key), kind) for key, kind in needs.items()):
-        keys = ", ".join(f"{key} (a {kind.__name__})" for key, kind in needs.items())
-        raise InputError(f"{path}: needs a JSON object with {keys}")
-    return found

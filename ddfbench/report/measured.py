@@ -25,7 +25,8 @@ import os
 import sys
 from typing import Any
 
-from ddfbench.core.errors import InputError, checked_json_object
+from ddfbench.core.errors import InputError
+from ddfbench.report.checked_json import checked_json_object
 from ddfbench.report.compact import folders_holding, portable, write_jsonl_gz
 from ddfbench.run.runs import code_commits, code_sha
 

@@ -32,9 +32,10 @@ from typing import Any
 import pandas as pd
 
 from ddfbench.core import plugins
-from ddfbench.core.errors import InputError, checked_json_object
+from ddfbench.core.errors import InputError
 from ddfbench.evaluate.metric_registry import objective_value
 from ddfbench.fit.tune import search_space
+from ddfbench.report.checked_json import checked_json_object
 from ddfbench.report.compact import folders_holding
 from ddfbench.run.runs import code_commits, find_records
 
