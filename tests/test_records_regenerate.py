@@ -330,3 +330,22 @@ def test_the_verdict_gives_a_preset_budgeted_in_epochs_its_own_row_without_a_col
     assert ("gan_sdf", "own: 38,982 steps") in {(r[0], r[1]) for r in verdict.rows(short, short, epochs=epochs)}
     assert not [r for r in rows if r[0] == "ddf_tuned" and r[1].endswith("epochs")]
     assert list(rows)[-1][0] == "gan_sdf"  # the GAN family comes last
+
+
+def test_the_verdict_footnote_times_one_fixed_build_in_each_record_set_only_at_one_resolution():
+    import copy
+
+    from ddfbench.report import verdict
+
+    short = compact.read_compact(os.path.join(ROOT, "reports", "default", compact.FILE))
+    built = [r for r in short if r["model"] == "grid_sdf" and r["shape"]["name"] == "bunny"]
+    slower = copy.deepcopy(built)
+    for r in slower:
+        r["cost"]["fit_s"] = 9.5
+    sentence = verdict.same_work_seconds({"default": short, "shape_suite": slower, "render_time": []})
+    mean = statistics.mean(r["cost"]["fit_s"] for r in built)
+    assert sentence.endswith(f"took {mean:.3g} s in `reports/default`, 9.5 s in `reports/shape_suite`.")
+    assert verdict.same_work_seconds({"default": short, "render_time": []}) == ""  # one set: nothing to compare
+    for r in slower:  # another resolution: another work, not a measure of the machines
+        r["cost"]["storage_bytes"] = 2 * r["cost"]["storage_bytes"]
+    assert verdict.same_work_seconds({"default": short, "shape_suite": slower}) == ""

@@ -12,7 +12,8 @@ of the noise floor (the mesh against a resample of itself at the same point coun
 seeds, the point-to-surface chamfer, F@0.005, depth MAE and mask IoU where the run rendered, fit or build seconds,
 warm frame seconds, bytes. A preset with a run on the bunny that gave no mesh or one off the shape is not ranked: its
 row says "not converged" when every run gave none, else in how many runs; the shapes left out of the last column for
-such a run are counted. The footnote names the device, threads, point counts and code commits of the records.
+such a run are counted. The footnote names the device, threads, point counts and code commits of the records, and
+the seconds one fixed build (the grid SDF's on the bunny) took in each set, since seconds differ by machine and load.
 --check exits 1 when reports/verdict.md or the README block differs from what the records give.
 """
 
@@ -44,6 +45,7 @@ from ddfbench.report.tables import budget_label, pipe_table
 START, END = "<!-- verdict:start (python -m ddfbench.report.verdict) -->", "<!-- verdict:end -->"
 SHORT, FULL, FRAMES, OTHER_FRAMES, GRID = "default", "shape_suite", "render_time", "render_shapes", "grid_encodings"
 EPOCHS = "gan_epochs"
+SAME_WORK = "grid_sdf"  # a build with no training: the same work wherever its bytes are the same
 SHAPE = "bunny"
 FAMILY_ORDER = ["mesh", "grid_sdf", "neural_sdf", "ddf", "gan_sdf"]  # the reference first, then the fields
 HEADER = ["preset", "budget", "CD-L2 / floor, geometric mean [95 %]", "p2s CD-L2 ×10³", "F@0.005",
@@ -159,7 +161,24 @@ def footnote(sets: dict[str, list[Record]]) -> str:
             "`reports/render_time`'s largest (else `reports/render_shapes`'), same preset and steps; own in epochs: "
             "`reports/gan_epochs` (the thesis GAN, bunny only); same grid: `reports/grid_encodings` (every family at "
             "3,000 steps) for presets the suite lacks, the last column over its shapes. Records: "
-            + "; ".join(parts) + ".")
+            + "; ".join(parts) + "." + same_work_seconds(sets))
+
+
+def same_work_seconds(sets: dict[str, list[Record]]) -> str:
+    """A sentence giving the seconds one fixed work took in each record set that timed it: the grid SDF's build on
+    the bunny (no training; equal bytes, so equal resolution), so that a reader sees how far the sets' machines and
+    loads differ before comparing seconds across them; '' unless two or more sets timed it at one resolution."""
+    timed = {}
+    for name, recs in sets.items():
+        mine = [r for r in ok_records(recs) if r.get("model") == SAME_WORK and shape_name(r) == SHAPE]
+        if mine:
+            timed[name] = mine
+    if len(timed) < 2 or len({_mean(recs, "storage_bytes") for recs in timed.values()}) != 1:
+        return ""
+    took = ", ".join(f"{_mean(recs, 'fit_s')} s in `reports/{name}`" for name, recs in timed.items())
+    return (" Seconds are each record set's own, on its machine under its load (a record names the CPU architecture, "
+            f"not the model), so compare them within one set: the same build, the grid SDF's on the {SHAPE}, took "
+            f"{took}.")
 
 
 def frame_records(sets: dict[str, list[Record]]) -> list[Record]:
