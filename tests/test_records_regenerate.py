@@ -342,10 +342,20 @@ def test_the_verdict_footnote_times_one_fixed_build_in_each_record_set_only_at_o
     slower = copy.deepcopy(built)
     for r in slower:
         r["cost"]["fit_s"] = 9.5
-    sentence = verdict.same_work_seconds({"default": short, "shape_suite": slower, "render_time": []})
+    elsewhere = copy.deepcopy(built)  # not the work: another shape, a failed run, another model
+    elsewhere[0]["shape"]["name"], elsewhere[1]["status"], elsewhere[2]["model"] = "cup", "failed", "mesh"
+    for r in elsewhere:
+        r["cost"]["fit_s"] = 1000.0
     mean = statistics.mean(r["cost"]["fit_s"] for r in built)
-    assert sentence.endswith(f"took {mean:.3g} s in `reports/default`, 9.5 s in `reports/shape_suite`.")
-    assert verdict.same_work_seconds({"default": short, "render_time": []}) == ""  # one set: nothing to compare
-    for r in slower:  # another resolution: another work, not a measure of the machines
+    sets = {"default": short, "shape_suite": slower + elsewhere, "render_time": elsewhere}
+    assert verdict.same_work_seconds(sets).endswith(
+        f"took {mean:.3g} s in `reports/default`, 9.5 s in `reports/shape_suite`.")
+    assert verdict.same_work_seconds({"default": short, "render_time": elsewhere}) == ""  # one set timed it
+    for r in slower[:1]:  # one run at another resolution: that set's seconds are not of the same work
         r["cost"]["storage_bytes"] = 2 * r["cost"]["storage_bytes"]
     assert verdict.same_work_seconds({"default": short, "shape_suite": slower}) == ""
+    third = copy.deepcopy(built)
+    for r in third:
+        r["cost"]["fit_s"] = 4.25
+    assert verdict.same_work_seconds({"default": short, "shape_suite": slower, "storage": third}).endswith(
+        f"took {mean:.3g} s in `reports/default`, 4.25 s in `reports/storage`.")  # the odd set alone is left out

@@ -166,16 +166,20 @@ def footnote(sets: dict[str, list[Record]]) -> str:
 
 def same_work_seconds(sets: dict[str, list[Record]]) -> str:
     """A sentence giving the seconds one fixed work took in each record set that timed it: the grid SDF's build on
-    the bunny (no training; equal bytes, so equal resolution), so that a reader sees how far the sets' machines and
-    loads differ before comparing seconds across them; '' unless two or more sets timed it at one resolution."""
+    the bunny (no training), in the sets whose runs built it at the first such set's bytes (so resolution) and
+    threads, so that a reader sees how far the sets' machines and loads differ before comparing seconds across
+    them; '' unless two or more sets timed that work."""
     timed = {}
     for name, recs in sets.items():
         mine = [r for r in ok_records(recs) if r.get("model") == SAME_WORK and shape_name(r) == SHAPE]
         if mine:
             timed[name] = mine
-    if len(timed) < 2 or len({_mean(recs, "storage_bytes") for recs in timed.values()}) != 1:
+    works = {name: {(r["cost"].get("storage_bytes"), r["env"].get("threads")) for r in recs}
+             for name, recs in timed.items()}
+    same = [name for name in timed if len(works[name]) == 1 and works[name] == next(iter(works.values()))]
+    if len(same) < 2:
         return ""
-    took = ", ".join(f"{_mean(recs, 'fit_s')} s in `reports/{name}`" for name, recs in timed.items())
+    took = ", ".join(f"{_mean(timed[name], 'fit_s')} s in `reports/{name}`" for name in same)
     return (" Seconds are each record set's own, on its machine under its load (a record names the CPU architecture, "
             f"not the model), so compare them within one set: the same build, the grid SDF's on the {SHAPE}, took "
             f"{took}.")
