@@ -124,13 +124,24 @@ def test_an_incumbent_that_did_not_converge_on_a_tuning_shape_gives_way_but_a_on
     assert verdict["winner"] in ("b", "c") and not verdict["incumbent_eligible"]
     text = finalists.sections(records)[0]
     assert f"| no | {verdict['winner']} |" in text and "(kept)" not in text.split("## Winner against runner-up")[1]
-    records = candidates({0})  # one seed of three: a miss that need not repeat, so a is kept
-    rows = finalists.candidate_rows(records)
-    a = next(r for r in rows if r["level"] == "a")
-    assert a["no_result_on"] == ["cow"] and a["not_converged_on"] == []
-    (verdict,) = finalists.verdicts(records, rows)
-    assert verdict["winner"] in ("b", "c") and verdict["incumbent_eligible"]
-    assert "| no | a (kept) |" in finalists.sections(records)[0]
+    for misses in ({0}, {0, 2}):  # some seeds only, even most: misses that need not repeat, so a is kept
+        records = candidates(misses)
+        rows = finalists.candidate_rows(records)
+        a = next(r for r in rows if r["level"] == "a")
+        assert a["no_result_on"] == ["cow"] and a["not_converged_on"] == []
+        (verdict,) = finalists.verdicts(records, rows)
+        assert verdict["winner"] in ("b", "c") and verdict["incumbent_eligible"]
+        assert "| no | a (kept) |" in finalists.sections(records)[0]
+    crashed = [{**r, "status": "failed"} if r["config"]["capacity"] == "a" and r["shape"]["name"] == "cow" else r
+               for r in candidates(set())]  # a crashed on the cow in every seed: not converged there either
+    (verdict,) = finalists.verdicts(crashed, finalists.candidate_rows(crashed))
+    assert not verdict["incumbent_eligible"]
+    alone = [r for r in candidates({0, 1, 2}) if r["config"]["capacity"] == "a"]  # no winner, and a may not be kept
+    assert "| – | none (no candidate converged on every tuning shape) |" in finalists.sections(alone)[0]
+    no_incumbent = [r for r in candidates(set()) if r["config"]["capacity"] != "a"]
+    (verdict,) = finalists.verdicts(no_incumbent, finalists.candidate_rows(no_incumbent))
+    assert not verdict["incumbent_eligible"]
+    assert f"| no | {verdict['winner']} |" in finalists.sections(no_incumbent)[0]
     # a converged everywhere, 1 % behind b (within the seeds' spread): b wins, not separably, and a is kept
     shapes = {"cow": 0, "torus": 1, "gear": 2}
     fixed = [rec("m", r["shape"]["name"], r["config"]["seed"], 1.01e-3 * (1 + shapes[r["shape"]["name"]])

@@ -7,8 +7,8 @@ with a run that gave no result on a shape is not eligible. The winner is the eli
 against the runner-up it is set shape by shape (n = shapes, the honest n for a claim about shapes) and run by run
 (n = shape x seed pairs, tighter but treating seeds as replicates). The incumbent (the preset as it is) is kept
 unless the winner is separable from its runner-up or the incumbent did not converge on a tuning shape (no result in
-any of its runs there): a miss in some runs only does not replace it, since such misses did not repeat when the
-protocol was run again at dc0a417 (each GAN candidate missed the cow in one of 3 seeds in one run, not in the other).
+any of its runs there): a miss in some runs only does not replace it. Such one-off misses moved the GAN's preset when
+they did: trial 15 missed the cow in one of 3 seeds at c020f6c and trial 16 did at dc0a417, each not the other time.
 """
 
 from __future__ import annotations
@@ -82,10 +82,13 @@ def verdicts(records: list[Record], rows: list[dict[str, Any]]) -> list[dict[str
 
 def preset_to_use(verdict: dict[str, Any], separable: bool) -> str:
     """The level the experiments should run: the winner when separable from its runner-up or when the incumbent may
-    not be kept (it did not converge on a tuning shape), else the incumbent; 'a (kept)' marks no change."""
+    not be kept (it did not converge on a tuning shape, or did not run), else the incumbent ('a (kept)': no change);
+    'none' when there is neither."""
     if verdict["winner"] is not None and (separable or not verdict["incumbent_eligible"]):
         return verdict["winner"]
-    return f"{INCUMBENT} (kept)"
+    if verdict["incumbent_eligible"]:
+        return f"{INCUMBENT} (kept)"
+    return "none (no candidate converged on every tuning shape)"
 
 
 def sections(records: list[Record]) -> list[str]:
@@ -104,9 +107,10 @@ def sections(records: list[Record]) -> list[str]:
               "separable from the runner-up when the by-shape interval lies below 1. The winner is picked and tested "
               "on the same runs, which leans towards 'separable'; a tie here is a tie. The preset the experiments use: "
               "the winner when it is separable, else the incumbent (level a, the preset as it was), so that a change "
-              "of preset, which makes every report of it stale, rests on more than seed noise. An incumbent that gave "
-              "no result in every run on a tuning shape is not kept: the winner replaces it, separable or not; a miss "
-              "in some runs only does not replace it (such misses did not repeat when the protocol was run again).",
+              "of preset, which makes every report of it stale, rests on more than seed noise. An incumbent with no "
+              "result in any of its runs on some tuning shape is not kept: the winner replaces it, separable or not; a "
+              "miss in some runs only does not replace it (one-off misses of the GAN's candidates on the cow, at "
+              "c020f6c and at dc0a417, did not repeat in the other run).",
               "",
               "| model | winner | runner-up | by shape [95 %] | by run [95 %] | separable | preset to use |",
               "|---|---|---|---|---|---|---|"]
