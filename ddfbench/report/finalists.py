@@ -19,7 +19,8 @@ from typing import Any
 from ddfbench.evaluate.metric_registry import by_name
 from ddfbench.report.across_shapes import OverShapes, fmt, geometric, ratio, shape_means
 from ddfbench.report.paired import log_ratio
-from ddfbench.report.records import Record, no_result, ok_records, shape_name
+from ddfbench.report.records import Record, ok_records, shape_name
+from ddfbench.report.shape_suite import cells_without_result
 
 CHAMFER = "chamfer_l2"
 INCUMBENT = "a"  # the level that is the preset as the experiments run it (each model YAML keeps its preset as a: {})
@@ -37,9 +38,9 @@ def candidate_rows(records: list[Record]) -> list[dict[str, Any]]:
     rows = []
     for model, level in sorted(dict.fromkeys(candidate(r) for r in records)):
         mine = [r for r in records if candidate(r) == (model, level)]
-        failed = sorted({shape_name(r) for r in mine if r.get("status") != "ok" or no_result(r)})
-        not_converged = [s for s in failed if all(r.get("status") != "ok" or no_result(r)
-                                                  for r in mine if shape_name(r) == s)]
+        cells = cells_without_result(mine)  # one model and level: a cell a shape
+        failed = sorted(c["shape"] for c in cells)
+        not_converged = sorted(c["shape"] for c in cells if c["failed"] == c["seeds"])
         mine = ok_records(mine)
         per_shape = shape_means((shape_name(r), read(r)) for r in mine if shape_name(r) not in failed)
         rows.append({"model": model, "level": level, "shapes": len({shape_name(r) for r in mine}),
