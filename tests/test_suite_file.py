@@ -125,6 +125,31 @@ def test_run_adds_the_overrides_after_the_double_dash_to_every_experiment_and_wr
     assert [c[3] for c in reports][:2] == [os.path.join("out", "default"), os.path.join("out", "representations")]
 
 
+def test_run_runs_the_sweeps_a_report_asks_for_then_writes_the_report_again(monkeypatch, tmp_path):
+    commands, asked = [], []
+
+    class Done:
+        returncode = 0
+
+    def confirmation(records):  # the protocol's follow-up, on the records the first report was written from
+        asked.append(records)
+        return [["+experiment=tune_finalists", "model=m", "capacity=a,b", "seed=3,4,5"]]
+
+    monkeypatch.setattr(suite.subprocess, "run", lambda cmd, **_: commands.append(cmd) or Done())
+    monkeypatch.setitem(suite.FOLLOW_UPS, "tune_finalists", confirmation)
+    run = ["run", "v1", "--tier", "long", "--only", "tune_finalists", "--results", str(tmp_path), "--", "threads=1"]
+    assert suite.main(run) == 0 and commands[1][2] == "ddfbench.report" and len(commands) == 2  # no records: none
+    commands.clear()
+    (tmp_path / "tune_finalists").mkdir()
+    assert suite.main(run) == 0 and asked == [[]]
+    report = [commands[1][2:], commands[3][2:]]
+    assert [c[2] for c in commands] == ["ddfbench", "ddfbench.report", "ddfbench", "ddfbench.report"]
+    assert commands[2][3:] == ["+experiment=tune_finalists", "model=m", "capacity=a,b", "seed=3,4,5",
+                               f"out_dir={tmp_path}", "quiet=true", "threads=1"]  # into the same out_dir
+    assert report[0] == report[1] == ["ddfbench.report", str(tmp_path / "tune_finalists"), "--out",
+                                      os.path.join(ROOT, "reports", "tune_finalists")]
+
+
 def test_run_from_reports_restores_each_report_s_committed_records_before_its_sweep(monkeypatch, tmp_path, capsys):
     commands = []
 

@@ -1,11 +1,12 @@
 """The shape suite's and the tuning protocol's report sections on synthetic records whose answers are known."""
 
 import math
+import os
 
 import pandas as pd
 import pytest
 
-from ddfbench.report import finalists, shape_suite
+from ddfbench.report import compact, finalists, shape_suite, suite
 from ddfbench.report.across_shapes import ratio
 
 
@@ -150,6 +151,62 @@ def test_an_incumbent_that_did_not_converge_on_a_tuning_shape_gives_way_but_a_on
     (tie,) = finalists.verdicts(fixed, finalists.candidate_rows(fixed))
     assert tie["winner"] != "a" and tie["incumbent_eligible"] and tie["by_shape"].hi >= 1
     assert f"| {tie['winner']} | " in finalists.sections(fixed)[0] and "| no | a (kept) |" in finalists.sections(fixed)[0]
+
+
+def separable_b(fresh_seeds=(), b_factor=0.8, b_empty_on=None):
+    """Level b 0.8x level a on every shape in seeds 0-2 (separable), with a and b run again on fresh_seeds, where b is
+    b_factor x a (its seed spread as in 0-2) and empty on shape b_empty_on in its first fresh seed."""
+    out = []
+    for shape_i, shape in enumerate(("cow", "torus", "gear", "open_box")):
+        for seed in (0, 1, 2, *fresh_seeds):
+            factor = 0.8 if seed < 3 else b_factor
+            spread = 1 + 0.1 * (seed % 3) + 0.02 * shape_i  # b's spread differs from a's: the ratios vary a little
+            out.append(rec("m", shape, seed, 1e-3 * (1 + shape_i) * (1 + 0.1 * (seed % 3)), level="a"))
+            out.append(rec("m", shape, seed, factor * 1e-3 * (1 + shape_i) * spread, level="b",
+                           empty=shape == b_empty_on and seed == fresh_seeds[0]))
+            if seed < 3:
+                out.append(rec("m", shape, seed, 2e-3 * (1 + shape_i), level="c"))
+    return out
+
+
+def test_a_separable_winner_replaces_the_incumbent_only_when_confirmed_on_fresh_seeds():
+    # selection seeds 0-2 only: b is separable from a but not yet confirmed; the sweep that would confirm it
+    records = separable_b()
+    assert finalists.selection_seeds() == [0, 1, 2]
+    (verdict,) = finalists.verdicts(records, finalists.candidate_rows(records))
+    assert (verdict["winner"], verdict["runner_up"], verdict["separable"]) == ("b", "a", True)
+    assert finalists.confirmation_sweeps(records) == [[
+        "+experiment=tune_finalists", "model=m", "capacity=a,b",
+        "shape=cow,torus,gear,open_box", "seed=3,4,5"]]
+    text = finalists.sections(records)[0]
+    assert "| yes | a (kept until b is confirmed on fresh seeds) |" in text
+    assert "| m | b / a | – | not run: `python -m ddfbench +experiment=tune_finalists " in text
+    # b again 0.8x a on seeds 3-5: confirmed, and the fresh seeds do not enter the selection's table
+    records = separable_b(fresh_seeds=(3, 4, 5))
+    assert finalists.confirmation_sweeps(records) == []
+    text = finalists.sections(records)[0]
+    assert "| yes | b (confirmed) |" in text and "| m | b / a | 3, 4, 5 | 0.8" in text and "| – | yes |" in text
+    assert "| m | a | " in text and " | 12 | 100 | – |" in text  # 4 shapes x seeds 0-2, not 24 runs
+    # b level with a on seeds 3-5 (a selection that was seed noise), or empty in one fresh run: a is kept
+    for fresh in (separable_b(fresh_seeds=(3, 4, 5), b_factor=1.0),
+                  separable_b(fresh_seeds=(3, 4, 5), b_empty_on="gear")):
+        text = finalists.sections(fresh)[0]
+        assert "| yes | a (kept: b not confirmed) |" in text and "| no |" in text.split("## Confirmation")[1]
+    assert "| gear | no |" in finalists.sections(separable_b(fresh_seeds=(3, 4, 5), b_empty_on="gear"))[0]
+
+
+def test_the_committed_protocol_run_needed_exactly_the_confirmation_that_was_run():
+    """reports/tune_finalists: without its fresh seeds, the protocol asks for ddf_tuned a and b on seeds 3-5, the sweep
+    that was run (reports/tune_finalists_confirm until 5ff6001); with them nothing is pending and b is not confirmed."""
+    committed = compact.read_compact(os.path.join(suite.ROOT, "reports", "tune_finalists", compact.FILE))
+    selection = [r for r in committed if r["config"]["seed"] in (0, 1, 2)]
+    (sweep,) = finalists.confirmation_sweeps(selection)
+    assert sweep[1:3] == ["model=ddf_tuned", "capacity=a,b"]
+    assert sweep[-1] == "seed=3,4,5"
+    jobs = suite.expand(suite.Entry("tune_finalists", "reports/tune_finalists", sweep[1:])).per_model()
+    assert jobs == {"ddf_tuned": 2 * 4 * 3}
+    assert finalists.confirmation_sweeps(committed) == []
+    assert "| ddf_tuned | b / a | 3, 4, 5 |" in finalists.sections(committed)[0]
 
 
 def test_the_ddf_sdf_claim_over_shapes_is_refuted_far_from_one_and_confirmed_near_it():

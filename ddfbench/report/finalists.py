@@ -1,5 +1,5 @@
 """The tuning protocol's verdict (+experiment=tune_finalists): each family's candidates on the tuning shapes, the
-winner, and the winner against the runner-up.
+winner, the winner against the runner-up, and a change of preset confirmed on fresh seeds.
 
 A candidate is a model preset at one of its `tune_finalists` levels (record config `capacity`). Its score is the
 geometric mean over the tuning shapes of its mean CD-L2 over seeds (ddfbench.report.across_shapes); a candidate
@@ -9,6 +9,13 @@ against the runner-up it is set shape by shape (n = shapes, the honest n for a c
 unless the winner is separable from its runner-up or the incumbent did not converge on a tuning shape (no result in
 any of its runs there): a miss in some runs only does not replace it. Such one-off misses moved the GAN's preset when
 they did: trial 15 missed the cow in one of 3 seeds at c020f6c and trial 16 did at dc0a417, each not the other time.
+
+The winner is picked and tested on the same seeds (the experiment's, SELECTION_SEEDS), which leans towards
+'separable'. So a separable winner that is not the incumbent replaces it only when confirmed on fresh seeds: the
+same shapes, the winner and the incumbent only, seeds the selection did not use (confirmation_sweeps gives the
+command; its records go into the same results folder and report). Confirmed: the winner has a result in every fresh
+run and its by-shape ratio to the incumbent there lies below 1. ddf_tuned's b was separable from a on seeds 0-2 at
+dc0a417 (0.888x [0.815, 0.968]) and not on seeds 3-5 (0.888x [0.753, 1.05]), so a stays.
 """
 
 from __future__ import annotations
@@ -16,6 +23,9 @@ from __future__ import annotations
 import math
 from typing import Any
 
+from omegaconf import OmegaConf
+
+from ddfbench.core.plugins import CONF_DIR
 from ddfbench.evaluate.metric_registry import by_name
 from ddfbench.report.across_shapes import OverShapes, fmt, geometric, ratio, shape_means
 from ddfbench.report.paired import log_ratio
@@ -24,6 +34,23 @@ from ddfbench.report.shape_suite import cells_without_result
 
 CHAMFER = "chamfer_l2"
 INCUMBENT = "a"  # the level that is the preset as the experiments run it (each model YAML keeps its preset as a: {})
+EXPERIMENT = "tune_finalists"
+
+
+def selection_seeds() -> list[int]:
+    """The seeds the protocol picks its winners on: conf/experiment/tune_finalists.yaml's sweep (0, 1, 2)."""
+    cfg = OmegaConf.load(f"{CONF_DIR}/experiment/{EXPERIMENT}.yaml")
+    return [int(s) for s in str(cfg.hydra.sweeper.params.seed).split(",")]
+
+
+def seed(rec: Record) -> Any:
+    return (rec.get("config") or {}).get("seed")
+
+
+def split_by_seed(records: list[Record]) -> tuple[list[int], list[Record], list[Record]]:
+    """(the selection seeds, the records of those seeds, the records of fresh seeds: the confirmation's)."""
+    chosen = selection_seeds()
+    return chosen, [r for r in records if seed(r) in chosen], [r for r in records if seed(r) not in chosen]
 
 
 def candidate(rec: Record) -> tuple[str, str]:
@@ -51,11 +78,22 @@ def candidate_rows(records: list[Record]) -> list[dict[str, Any]]:
     return rows
 
 
+def _runs(records: list[Record], model: str, level: str) -> dict[tuple, float]:
+    """{(shape, seed): CD-L2} of a candidate's finished runs."""
+    read = by_name()[CHAMFER].read
+    return {(shape_name(r), seed(r)): read(r) for r in ok_records(records) if candidate(r) == (model, level)}
+
+
+def _by_run(records: list[Record], model: str, a: str, b: str) -> OverShapes:
+    """CD-L2 ratio a / b paired run by run (shape x seed) with its t interval over runs."""
+    s = log_ratio(_runs(records, model, a), _runs(records, model, b))
+    return OverShapes(math.exp(s.mean), math.exp(s.lo), math.exp(s.hi), s.n)
+
+
 def verdicts(records: list[Record], rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
     """Per model: winner, runner-up, the shape-level and run-level ratio winner / runner-up. Eligible: a candidate
     with a result in every run on every shape any candidate of its model ran. incumbent_eligible: the incumbent ran
     and converged on every such shape (a result in at least one run each), so it may be kept."""
-    read = by_name()[CHAMFER].read
     out = []
     for model in dict.fromkeys(r["model"] for r in rows):
         shapes = max(r["shapes"] for r in rows if r["model"] == model)
@@ -66,38 +104,83 @@ def verdicts(records: list[Record], rows: list[dict[str, Any]]) -> list[dict[str
         kept = bool(incumbent) and incumbent[0]["shapes"] == shapes and not incumbent[0]["not_converged_on"]
         if len(eligible) < 2:
             out.append({"model": model, "winner": eligible[0]["level"] if eligible else None, "runner_up": None,
-                        "incumbent_eligible": kept})
+                        "incumbent_eligible": kept, "separable": False})
             continue
         win, second = eligible[0], eligible[1]
-
-        def runs_of(level: str) -> dict[tuple, float]:
-            return {(shape_name(r), (r.get("config") or {}).get("seed")): read(r)
-                    for r in ok_records(records) if candidate(r) == (model, level)}
-
-        by_run = log_ratio(runs_of(win["level"]), runs_of(second["level"]))
+        by_shape = ratio(win["per_shape"], second["per_shape"])
         out.append({"model": model, "winner": win["level"], "runner_up": second["level"], "incumbent_eligible": kept,
-                    "by_shape": ratio(win["per_shape"], second["per_shape"]),
-                    "by_run": OverShapes(math.exp(by_run.mean), math.exp(by_run.lo), math.exp(by_run.hi), by_run.n)})
+                    "by_shape": by_shape, "by_run": _by_run(records, model, win["level"], second["level"]),
+                    "separable": math.isfinite(by_shape.hi) and by_shape.hi < 1})
     return out
 
 
-def preset_to_use(verdict: dict[str, Any], separable: bool) -> str:
-    """The level the experiments should run: the winner when separable from its runner-up or when the incumbent may
-    not be kept (it did not converge on a tuning shape, or did not run), else the incumbent ('a (kept)': no change);
-    'none' when there is neither."""
-    if verdict["winner"] is not None and (separable or not verdict["incumbent_eligible"]):
-        return verdict["winner"]
+def needs_confirmation(verdict: dict[str, Any]) -> bool:
+    """Whether the verdict proposes to replace a convergent incumbent by a separable winner."""
+    return verdict["separable"] and verdict["winner"] != INCUMBENT and verdict["incumbent_eligible"]
+
+
+def confirmation(fresh: list[Record], verdict: dict[str, Any]) -> dict[str, Any] | None:
+    """The winner against the incumbent on the fresh seeds' records (None when there are none): by-shape and by-run
+    CD-L2 ratio winner / incumbent, the shapes where a winner's fresh run gave no result, and confirmed."""
+    model, win = verdict["model"], verdict["winner"]
+    mine = [r for r in fresh if r.get("model") == model]
+    if not any(candidate(r)[1] == win for r in mine):
+        return None
+    read = by_name()[CHAMFER].read
+
+    def per_shape(level: str) -> dict[str, float]:
+        return shape_means((shape_name(r), read(r)) for r in ok_records(mine) if candidate(r)[1] == level)
+
+    misses = sorted(c["shape"] for c in cells_without_result([r for r in mine if candidate(r)[1] == win]))
+    by_shape = ratio(per_shape(win), per_shape(INCUMBENT))
+    return {"by_shape": by_shape, "by_run": _by_run(mine, model, win, INCUMBENT), "no_result_on": misses,
+            "seeds": sorted({seed(r) for r in mine}),
+            "confirmed": not misses and math.isfinite(by_shape.hi) and by_shape.hi < 1}
+
+
+def _confirmation_sweep(verdict: dict[str, Any], selection: list[Record], chosen: list[int]) -> list[str]:
+    """The overrides of the sweep that confirms a verdict's winner: the winner and the incumbent on the tuning shapes
+    its model ran, on as many seeds after the selection's."""
+    shapes = ",".join(dict.fromkeys(shape_name(r) for r in selection if r.get("model") == verdict["model"]))
+    seeds = ",".join(str(max(chosen) + 1 + i) for i in range(len(chosen)))
+    return [f"+experiment={EXPERIMENT}", f"model={verdict['model']}", f"capacity={INCUMBENT},{verdict['winner']}",
+            f"shape={shapes}", f"seed={seeds}"]  # on the command line: they replace the experiment's sweep
+
+
+def confirmation_sweeps(records: list[Record]) -> list[list[str]]:
+    """The overrides of each sweep the protocol still needs: one per model whose change of preset has no records on
+    fresh seeds yet (python -m ddfbench OVERRIDES ... into the same results folder, then the report again)."""
+    chosen, selection, fresh = split_by_seed(records)
+    return [_confirmation_sweep(v, selection, chosen) for v in verdicts(selection, candidate_rows(selection))
+            if needs_confirmation(v) and confirmation(fresh, v) is None]
+
+
+def preset_to_use(verdict: dict[str, Any]) -> str:
+    """The level the experiments should run: the winner when the incumbent may not be kept (it did not converge on a
+    tuning shape, or did not run) or when it is separable from its runner-up and confirmed on fresh seeds (verdict
+    key "confirm", from confirmation); else the incumbent ('a (kept)': no change); 'none' when there is neither."""
+    win = verdict["winner"]
+    if win is not None and (not verdict["incumbent_eligible"] or win == INCUMBENT and verdict["separable"]):
+        return win
+    if needs_confirmation(verdict):
+        check = verdict.get("confirm")
+        if check is None:
+            return f"{INCUMBENT} (kept until {win} is confirmed on fresh seeds)"
+        return f"{win} (confirmed)" if check["confirmed"] else f"{INCUMBENT} (kept: {win} not confirmed)"
     if verdict["incumbent_eligible"]:
         return f"{INCUMBENT} (kept)"
     return "none (no candidate converged on every tuning shape)"
 
 
 def sections(records: list[Record]) -> list[str]:
-    """The markdown of the candidates' table and the verdicts."""
-    rows = candidate_rows(records)
+    """The markdown of the candidates' table, the verdicts and the confirmations (records of seeds outside
+    selection_seeds are the confirmation's)."""
+    chosen, selection, fresh = split_by_seed(records)
+    rows = candidate_rows(selection)
     lines = ["## Candidates on the tuning shapes", "",
-             "score: geometric mean over the tuning shapes of the mean CD-L2 ×10³ over seeds, with the t interval of "
-             "the mean log over shapes (n: shapes where every run gave a result). Fixed work: steps as run.", "",
+             f"Seeds {', '.join(map(str, chosen))}. score: geometric mean over the tuning shapes of the mean CD-L2 "
+             "×10³ over seeds, with the t interval of the mean log over shapes (n: shapes where every run gave a "
+             "result). Fixed work: steps as run.", "",
              "| model | level | score CD-L2 ×10³ [95 %] | runs | steps | a run with no result on |",
              "|---|---|---|---|---|---|"]
     lines += [f"| {r['model']} | {r['level']} | {fmt(r['score'], 1e3)} | {r['runs']} | {r['steps']:,} | "
@@ -106,23 +189,42 @@ def sections(records: list[Record]) -> list[str]:
               "Ratio of CD-L2 winner / runner-up: by shape (geometric mean of per-shape ratios of seed means, t "
               "interval over shapes) and by run (paired shape x seed, t interval over runs). The winner is "
               "separable from the runner-up when the by-shape interval lies below 1. The winner is picked and tested "
-              "on the same runs, which leans towards 'separable'; a tie here is a tie. The preset the experiments use: "
-              "the winner when it is separable, else the incumbent (level a, the preset as it was), so that a change "
-              "of preset, which makes every report of it stale, rests on more than seed noise. An incumbent with no "
-              "result in any of its runs on some tuning shape is not kept: the winner replaces it, separable or not; a "
-              "miss in some runs only does not replace it (one-off misses of the GAN's candidates on the cow, at "
-              "c020f6c and at dc0a417, did not repeat in the other run).",
+              "on the same runs, which leans towards 'separable', so a separable winner that is not the incumbent "
+              "(level a, the preset as it was) replaces it only when confirmed on fresh seeds (next section): a "
+              "change of preset makes every report of it stale and should rest on more than seed noise. A tie here "
+              "is a tie: the incumbent stays. An incumbent with no result in any of its runs on some tuning shape is "
+              "not kept: the winner replaces it, separable or not; a miss in some runs only does not replace it "
+              "(one-off misses of the GAN's candidates on the cow, at c020f6c and at dc0a417, did not repeat in the "
+              "other run).",
               "",
               "| model | winner | runner-up | by shape [95 %] | by run [95 %] | separable | preset to use |",
               "|---|---|---|---|---|---|---|"]
-    for v in verdicts(records, rows):
+    checks = []
+    for v in verdicts(selection, rows):
+        if needs_confirmation(v):
+            v["confirm"] = confirmation(fresh, v)
+            checks.append(v)
         if v["runner_up"] is None:
             winner = v["winner"] or "no candidate had a result in every run"
-            lines.append(f"| {v['model']} | {winner} | – | – | – | – | "
-                         f"{preset_to_use(v, separable=False)} |")
+            lines.append(f"| {v['model']} | {winner} | – | – | – | – | {preset_to_use(v)} |")
             continue
-        separable = math.isfinite(v["by_shape"].hi) and v["by_shape"].hi < 1
-        use = preset_to_use(v, separable)
         lines.append(f"| {v['model']} | {v['winner']} | {v['runner_up']} | {fmt(v['by_shape'])} | "
-                     f"{fmt(v['by_run'])} | {'yes' if separable else 'no'} | {use} |")
+                     f"{fmt(v['by_run'])} | {'yes' if v['separable'] else 'no'} | {preset_to_use(v)} |")
+    if checks:
+        lines += ["", "## Confirmation on fresh seeds", "",
+                  "Each separable winner that would replace the incumbent, against the incumbent on seeds the "
+                  "selection did not use: CD-L2 ratio winner / incumbent by shape and by run. Confirmed when the "
+                  "winner has a result in every fresh run and the by-shape interval lies below 1.", "",
+                  "| model | winner / incumbent | seeds | by shape [95 %] | by run [95 %] | "
+                  "winner's run with no result on | confirmed |", "|---|---|---|---|---|---|---|"]
+        for v in checks:
+            c = v["confirm"]
+            if c is None:
+                command = " ".join(["python -m ddfbench", *_confirmation_sweep(v, selection, chosen)])
+                lines.append(f"| {v['model']} | {v['winner']} / {INCUMBENT} | – | not run: `{command}` | – | – "
+                             "| – |")
+                continue
+            lines.append(f"| {v['model']} | {v['winner']} / {INCUMBENT} | {', '.join(map(str, c['seeds']))} | "
+                         f"{fmt(c['by_shape'])} | {fmt(c['by_run'])} | {', '.join(c['no_result_on']) or '–'} | "
+                         f"{'yes' if c['confirmed'] else 'no'} |")
     return ["\n".join(lines) + "\n"]

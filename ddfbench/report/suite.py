@@ -1,14 +1,16 @@
 """`python -m ddfbench.suite run NAME --tier TIER [--only EXP,...] [--dry-run] [--from-reports] [--results DIR]
 [-- OVERRIDE ...]` and `python -m ddfbench.suite status NAME`.
 
-A suite file (conf/suite/<name>.yaml) names the benchmark: per tier, each experiment with the report folder it
-writes and the overrides its command line adds. `run --dry-run` prints each experiment's jobs per model and its
-estimated CPU-hours, from the committed records' wall time per job (the report's own records.jsonl.gz at the job's
-capacity level, else of its model, else any committed record of the same model, else unknown; a wall-clock job costs
-at least its bound; a fixed-work job's fit time is scaled to its own steps or epochs); `run` runs each experiment (Hydra resumes finished jobs and
-prints a progress line per job with an ETA), then writes its report; with --from-reports it first restores the
-reports' committed records into the results folder, so that a tier resumes across machines. `status` says, per report, the code commit
-its records come from and whether the code or config of a model it ran changed since (stale), by `git diff`.
+A suite file (conf/suite/<name>.yaml) names the benchmark: per tier, each experiment with the report folder it writes
+and the overrides its command line adds. `run --dry-run` prints each experiment's jobs per model and its estimated
+CPU-hours, from the committed records' wall time per job (the report's own records.jsonl.gz at the job's capacity level,
+else of its model, else any committed record of the same model, else unknown; a wall-clock job costs at least its bound;
+a fixed-work job's fit time is scaled to its own steps or epochs); `run` runs each experiment (Hydra resumes finished
+jobs and prints a progress line per job with an ETA), then writes its report, then runs the sweeps that report asks for
+(FOLLOW_UPS: the tuning protocol's confirmation on fresh seeds) and writes it again; with --from-reports it first
+restores the reports' committed records into the results folder, so that a tier resumes across machines. `status` says,
+per report, the code commit its records come from and whether the code or config of a model it ran changed since
+(stale), by `git diff`.
 """
 
 from __future__ import annotations
@@ -27,11 +29,13 @@ from omegaconf import OmegaConf
 from ddfbench.core import plugins
 from ddfbench.core.errors import InputError
 from ddfbench.core.plugins import CONF_DIR
-from ddfbench.report import compact
+from ddfbench.report import compact, finalists
 from ddfbench.report.status import compose_job
 from ddfbench.run import runs
 
 ROOT = os.path.dirname(CONF_DIR)
+# experiment: its records -> the overrides of each sweep its report still needs (run into the same out_dir)
+FOLLOW_UPS = {"tune_finalists": finalists.confirmation_sweeps}
 
 
 @dataclass
@@ -281,8 +285,16 @@ def run(suite: str, tier: str, results: str, extra: list[str] | None = None, fro
         rc = max(rc, subprocess.run(cmd).returncode)
         records_dir = os.path.join(results, str(OmegaConf.load(os.path.join(
             CONF_DIR, "experiment", f"{entry.experiment}.yaml")).get("experiment_name") or entry.experiment))
-        rc = max(rc, subprocess.run([sys.executable, "-m", "ddfbench.report", records_dir, "--out",
-                                     os.path.join(ROOT, entry.report)]).returncode)
+        report = [sys.executable, "-m", "ddfbench.report", records_dir, "--out", os.path.join(ROOT, entry.report)]
+        rc = max(rc, subprocess.run(report).returncode)
+        follow_up = FOLLOW_UPS.get(entry.experiment)
+        sweeps = follow_up(compact.load_records(records_dir)) if follow_up and os.path.isdir(records_dir) else []
+        for overrides in sweeps:  # complete sweeps of their own: the entry's overrides are not added
+            cmd = [sys.executable, "-m", "ddfbench", *overrides, f"out_dir={results}", "quiet=true", *(extra or [])]
+            print("$", " ".join(cmd[1:]), flush=True)
+            rc = max(rc, subprocess.run(cmd).returncode)
+        if sweeps:
+            rc = max(rc, subprocess.run(report).returncode)
     return rc
 
 
