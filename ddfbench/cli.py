@@ -3,7 +3,8 @@
 Without `model=` or `+experiment=` it runs `+experiment=default` (every family, small budget) with the
 given overrides, so `python -m ddfbench shape=cow` compares every family on the cow.
 A single run that fails exits non-zero with a one-line error; in a sweep a failure is a `failed`
-record and the sweep goes on. Nothing here holds module-level state (launchers pickle the task).
+record and the sweep goes on, then exits 1. A command-line value that a job's level would replace stops the command
+(check_levels_keep). Nothing here holds module-level state (launchers pickle the task).
 """
 
 from __future__ import annotations
@@ -39,6 +40,7 @@ def task(cfg: DictConfig) -> str | float:
     plain: dict[str, Any] = OmegaConf.to_container(cfg, resolve=True)  # type: ignore[assignment]
     try:  # a setting of the whole command (threads, experiment_name): one line and stop, before any run
         plain["threads"], device = launch.job_settings(plain, hc)
+        check_levels_keep(plain, dict(hc.runtime.choices), list(hc.overrides.task))
         record = runner.run(plain, choices=dict(hc.runtime.choices), overrides=list(hc.overrides.task), device=device)
     except InputError as err:
         print(f"ddfbench: {err}", file=sys.stderr)
@@ -68,7 +70,8 @@ def task(cfg: DictConfig) -> str | float:
 
 
 class SweepTableCallback(Callback):
-    """Sweep progress lines (ddfbench.run.progress) and, at the end of a sweep, the table of its records."""
+    """Sweep progress lines (ddfbench.run.progress) and, at the end of a sweep, the table of its records; a sweep with
+    a failed job exits 1 once every job has run, with one line naming how many failed and the first one's error."""
 
     def on_multirun_start(self, config: DictConfig, **kwargs: Any) -> None:
         from ddfbench.run.progress import count_jobs, start_sweep
@@ -97,6 +100,12 @@ class SweepTableCallback(Callback):
             folder = os.path.join(out_dir, str(records[0]["experiment"]))
             print(console_table(summarize(records)) + f"records: {folder}\n"
                   f"full table, plots and gallery: python -m ddfbench.report {folder}   (writes {folder}/report)")
+        failed = [r for r in records if r.get("status") != "ok"]
+        if failed:
+            first = failed[0]
+            print(f"ddfbench: {len(failed)} of {len(records)} jobs failed (first: {first.get('model')} on "
+                  f"{(first.get('shape') or {}).get('name')}: {first.get('error')})", file=sys.stderr)
+            sys.exit(1)
 
 
 def wants_default_experiment(args: list[str]) -> bool:
@@ -135,6 +144,40 @@ def checked_overrides(args: list[str]) -> list[str]:
         plugins.strict_keys(group, {key.split(".")[0]: value}, known)
         out.append(f"++{path}={value}" if key.split(".")[0] not in own and not arg.startswith("+") else arg)
     return out
+
+
+def _at(cfg: Any, path: str) -> tuple[bool, Any]:
+    """(found, value) of a dotted key in a plain nested dict."""
+    for part in path.split("."):
+        if not isinstance(cfg, dict) or part not in cfg:
+            return False, None
+        cfg = cfg[part]
+    return True, cfg
+
+
+def check_levels_keep(cfg: dict[str, Any], choices: dict[str, str], overrides: list[str]) -> None:
+    """A one-line InputError when a `key=value` of the command line is replaced by the level the job applies
+    (plugins.job_config: e.g. ddf_tuned's `first_look` sets train.max_steps for the default run), which would run
+    another value than the one given. cfg: the resolved job config before its levels; choices: Hydra's group
+    choices; overrides: the job's command-line overrides. A level the job's model or sampler lacks is runner.run's
+    to report."""
+    from ddfbench.core.errors import InputError
+
+    try:
+        leveled = plugins.job_config(cfg, choices)
+    except InputError:
+        return
+    for arg in overrides:
+        path, _, given = arg.lstrip("+").partition("=")
+        if not _ or path in choices or path.startswith("hydra.") or path in plugins.LEVEL_KEYS.values():
+            continue
+        (found, asked), (_, ran) = _at(cfg, path), _at(leveled, path)
+        if found and asked != ran:
+            keys = [k for k in plugins.LEVEL_KEYS.values() if cfg.get(k) is not None]
+            raise InputError(f"{path}={given}: the level {' '.join(f'{k}={cfg[k]}' for k in keys)} of experiment "
+                             f"{cfg.get('experiment_name')} sets {path} to {ran} for model {choices.get('model')}, "
+                             f"which would replace the value given (drop it, or run without the levels: "
+                             f"{' '.join(f'{k}=null' for k in keys)})")
 
 
 EXTRA_OF_EXPERIMENT = {"tune": ("optuna", "tune")}  # experiment -> (module it needs, pip extra that installs it)

@@ -75,7 +75,8 @@ def test_sweep_goes_on_after_a_failure_and_report_renders(tmp_path):
     args = [a for a in SMALL if not a.startswith(("shape=", "model="))]
     out = ddfbench(["--multirun", "shape=cube,file", f"shape.path={bad}", "model=mesh,mesh_lod500",
                     "experiment_name=sweep", *args], tmp_path)
-    assert out.returncode == 0, out.stderr
+    assert out.returncode == 1  # every job ran; the sweep says how many failed
+    assert out.stderr.strip().splitlines()[-1].startswith("ddfbench: 2 of 4 jobs failed (first: mesh")
     recs = records(tmp_path / "sweep")
     assert sorted(r["status"] for r in recs) == ["failed", "failed", "ok", "ok"]
     assert all(str(bad) in r["error"] for r in recs if r["status"] == "failed")
@@ -106,7 +107,7 @@ def test_a_bad_run_value_is_a_failed_record_naming_the_key(tmp_path, args, named
 def test_a_bad_seed_fails_its_own_run_and_the_sweep_goes_on(tmp_path):
     out = ddfbench(["--multirun", "seed=0,abc", "experiment_name=seeds", *[a for a in SMALL if a != "scene=none"],
                     "scene.width=8", "scene.height=8"], tmp_path)
-    assert out.returncode == 0, out.stderr
+    assert out.returncode == 1 and "ddfbench: 1 of 2 jobs failed" in out.stderr.strip().splitlines()[-1]
     assert sorted(r["status"] for r in records(tmp_path / "seeds")) == ["failed", "ok"]
     rep = ddfbench([str(tmp_path / "seeds"), "--out", str(tmp_path / "rep")], tmp_path, module="ddfbench.report")
     assert rep.returncode == 0, rep.stderr  # the gallery orders the ok runs by seed: the failed 'abc' is not one
@@ -119,3 +120,18 @@ def test_bad_threads_stop_the_command_before_any_run(tmp_path, value, named):
     assert out.returncode == 1 and "Traceback" not in out.stderr
     assert out.stderr.strip().splitlines() == [f"ddfbench: {named}: must be an integer >= 0"]
     assert records(tmp_path) == []
+
+
+def test_a_value_the_experiment_s_level_would_replace_stops_the_command_and_capacity_null_runs_it(tmp_path):
+    # the default run's first_look level sets ddf_tuned's train.max_steps to 3000: 5 steps would not be what ran
+    fast = ["+experiment=default", "model=ddf_tuned", "eval=smoke", "scene=none", "threads=1"]
+    out = ddfbench([*fast, "train.max_steps=5"], tmp_path)
+    assert out.returncode == 1 and "Traceback" not in out.stderr
+    assert out.stderr.strip().splitlines()[-1] == (
+        "ddfbench: train.max_steps=5: the level capacity=first_look of experiment default sets train.max_steps to 3000 "
+        "for model ddf_tuned, which would replace the value given (drop it, or run without the levels: capacity=null)")
+    assert records(tmp_path) == []
+    out = ddfbench([*fast, "train.max_steps=5", "capacity=null"], tmp_path)
+    assert out.returncode == 0, out.stderr
+    (rec,) = records(tmp_path)
+    assert rec["status"] == "ok" and rec["fit"]["steps"] == 5

@@ -13,6 +13,7 @@ from ddfbench.report import compact, measured, site
 from ddfbench.report.records import no_result
 
 WebDriverWait = pytest.importorskip("selenium.webdriver.support.wait").WebDriverWait
+TimeoutException = pytest.importorskip("selenium.common.exceptions").TimeoutException
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 CHROMIUM, DRIVER = shutil.which("chromium"), shutil.which("chromedriver")
@@ -80,6 +81,10 @@ def test_pareto_page_plots_every_run_and_a_legend_click_hides_a_family(browser, 
                    if read["chamfer_l2"].read(r) > 0 and math.isfinite(read[x].read(r)) and read[x].read(r) > 0)
     assert got["runs"] == expected > 0
     browser.get(f"file://{out}/pareto.html")
+    try:  # plotly draws after the page loads: on a busy machine, seconds later
+        WebDriverWait(browser, 60).until(lambda b: sum(b.execute_script(POINTS).values()) >= expected)
+    except TimeoutException:
+        pass  # the assertion below says what was drawn
     counts = browser.execute_script(POINTS)
     assert sum(counts.values()) == expected, counts
     assert not errors(browser)
@@ -127,3 +132,14 @@ def test_each_report_page_names_its_commit_and_the_index_marks_those_without_rec
     for rel in folders:  # each link goes to its own folder's page, marked when that folder has no records
         link = f"<a href='report-{rel.replace(os.sep, '-')}.html'>{rel}</a>"
         assert (f"{link} (not regenerable from records)" in front) == (rel in without) and link in front, rel
+
+
+def test_an_out_that_is_a_file_or_cannot_be_made_is_one_line(tmp_path, capsys):
+    taken = tmp_path / "taken"
+    taken.write_text("not a folder")
+    reports = os.path.join(ROOT, "reports")
+    assert site.main(["--reports", reports, "--out", str(taken)]) == 2
+    assert capsys.readouterr().err == f"ddfbench.report.site: --out {taken}: is a file, not a folder\n"
+    assert taken.read_text() == "not a folder"
+    assert site.main(["--reports", reports, "--out", str(taken / "site")]) == 2  # below a file: cannot be made
+    assert capsys.readouterr().err.startswith(f"ddfbench.report.site: --out {taken / 'site'}: cannot be written (")

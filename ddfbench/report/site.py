@@ -240,7 +240,14 @@ def main(argv: list[str] | None = None) -> int:
     if not os.path.isdir(args.reports):
         print(f"ddfbench.report.site: --reports {args.reports}: no such folder", file=sys.stderr)
         return 2
-    got = write_site(args.reports, args.out)
+    if os.path.exists(args.out) and not os.path.isdir(args.out):
+        print(f"ddfbench.report.site: --out {args.out}: is a file, not a folder", file=sys.stderr)
+        return 2
+    try:
+        got = write_site(args.reports, args.out)
+    except OSError as exc:  # a folder that cannot be made or written
+        print(f"ddfbench.report.site: --out {args.out}: cannot be written ({exc.strerror or exc})", file=sys.stderr)
+        return 2
     print(f"wrote {args.out}/index.html: {got['runs']} run points, {got['pages']} report pages, "
           f"{got['galleries']} galleries", flush=True)
     if args.screenshot:
