@@ -180,6 +180,24 @@ def check_levels_keep(cfg: dict[str, Any], choices: dict[str, str], overrides: l
                              f"{' '.join(f'{k}=null' for k in keys)})")
 
 
+def check_plain_keys(args: list[str]) -> None:
+    """A one-line InputError, with the near-miss names, for a `key=` or `train|eval|oracle.key=` override without
+    `+` that nothing declares (`train.max_step=5`), which Hydra would refuse in several lines; the `+` form is
+    checked per job (ddfbench.run.checks.check_known_keys)."""
+    from ddfbench.run.checks import CHECKED_SECTIONS, declared_keys
+
+    known = declared_keys()
+    for arg in args:
+        path, eq, value = arg.partition("=")
+        if not eq or arg.startswith(("+", "~", "-")) or "/" in path or path.startswith("hydra."):
+            continue
+        section, _, key = path.partition(".")
+        if not key:
+            plugins.strict_keys("", {section: value}, dict.fromkeys(known[""]), near=True)
+        elif section in CHECKED_SECTIONS:
+            plugins.strict_keys(section, {key.split(".")[0]: value}, dict.fromkeys(known[section]), near=True)
+
+
 EXTRA_OF_EXPERIMENT = {"tune": ("optuna", "tune")}  # experiment -> (module it needs, pip extra that installs it)
 
 
@@ -285,6 +303,7 @@ def main() -> None:
         check_extras(sys.argv[1:])
         check_threads(sys.argv[1:])
         check_out_dir(sys.argv[1:])
+        check_plain_keys(sys.argv[1:])
         sys.argv[1:] = checked_overrides(sys.argv[1:])
     except InputError as err:
         print(f"ddfbench: {err}", file=sys.stderr)

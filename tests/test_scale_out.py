@@ -30,13 +30,14 @@ TIMING_KEY = re.compile(r"(_s|seconds|_threads|cache_hit|speed_vs_reference)$")
 VOLATILE = ("started", "finished", "env", "_dir")
 
 
-def launch(out_dir, *extra, wait=True, log=None):
-    """`python -m ddfbench <smoke sweep> out_dir=... <extra>`; waits, or returns the Popen (own session)."""
+def launch(out_dir, *extra, wait=True, log=None, rc=0):
+    """`python -m ddfbench <smoke sweep> out_dir=... <extra>`; waits (and expects exit code rc: 1 when a job
+    failed), or returns the Popen (own session)."""
     cmd = [sys.executable, "-m", "ddfbench", *SMOKE, f"out_dir={out_dir}", *extra]
     env = dict(os.environ, PYTHONUNBUFFERED="1")
     if wait:
         out = subprocess.run(cmd, capture_output=True, text=True, env=env, timeout=300)
-        assert out.returncode == 0, out.stderr[-3000:]
+        assert out.returncode == rc, out.stderr[-3000:]
         return out
     return subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, env=env, start_new_session=True)
 
@@ -225,7 +226,8 @@ def test_killed_sweep_resumes_without_loss_or_duplicates(tmp_path):
 def test_failed_runs_rerun_and_status_reports_them(tmp_path, capsys):
     mesh = tmp_path / "late.obj"
     args = ["shape.name=file", f"shape.path={mesh}", "sampling=random"]  # both models
-    launch(tmp_path, *args)
+    out = launch(tmp_path, *args, rc=1)  # every job ran, and the sweep says they failed
+    assert out.stderr.strip().splitlines()[-1].startswith("ddfbench: 2 of 2 jobs failed (first: ")
     first = by_key(tmp_path)
     assert len(first) == 2 and all(r["status"] == "failed" for r in first.values())
     records_dir = os.path.join(str(tmp_path), "smoke")
