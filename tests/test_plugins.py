@@ -160,3 +160,19 @@ def test_command_line_overrides_are_checked_against_the_named_plugin():
         checked_overrides(["sampling=random", "sampling.n_sampels=5"])
     with pytest.raises(InputError, match=r"^model.faces: unknown key"):
         checked_overrides(["model=ddf", "model.faces=5"])  # a mesh key, not a DDF's
+
+
+def test_the_cli_shortens_openmp_spin_unless_the_environment_sets_a_wait_policy(monkeypatch):
+    from ddfbench import cli
+
+    for name in ("GOMP_SPINCOUNT", "OMP_WAIT_POLICY"):
+        monkeypatch.delenv(name, raising=False)
+    cli.short_openmp_spin()
+    assert os.environ["GOMP_SPINCOUNT"] == cli.OPENMP_SPIN == "1000"
+    monkeypatch.setenv("GOMP_SPINCOUNT", "5")
+    cli.short_openmp_spin()
+    assert os.environ["GOMP_SPINCOUNT"] == "5"  # the user's own value stays
+    monkeypatch.delenv("GOMP_SPINCOUNT")
+    monkeypatch.setenv("OMP_WAIT_POLICY", "ACTIVE")
+    cli.short_openmp_spin()
+    assert "GOMP_SPINCOUNT" not in os.environ  # a wait policy of the user's: its spin is libgomp's to choose
