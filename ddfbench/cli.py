@@ -18,7 +18,7 @@ import hydra
 from hydra.core.hydra_config import HydraConfig
 from hydra.experimental.callback import Callback
 from hydra.types import RunMode
-from omegaconf import DictConfig, OmegaConf
+from omegaconf import DictConfig, OmegaConf, open_dict
 
 from ddfbench.core import plugins
 from ddfbench.core.plugins import CONF_DIR  # plugins registers the `members` resolver the experiments use
@@ -74,7 +74,14 @@ class SweepTableCallback(Callback):
     a failed job exits 1 once every job has run, with one line naming how many failed and the first one's error."""
 
     def on_multirun_start(self, config: DictConfig, **kwargs: Any) -> None:
+        from ddfbench.core.errors import InputError
         from ddfbench.run.progress import count_jobs, start_sweep
+
+        try:
+            check_sweep_levels(config)
+        except InputError as err:
+            print(f"ddfbench: {err}", file=sys.stderr)
+            sys.exit(1)
 
         sweeper = config.hydra.sweeper
         total = count_jobs(list(config.hydra.overrides.task), sweeper.get("params"), sweeper.get("n_trials"))
@@ -89,7 +96,8 @@ class SweepTableCallback(Callback):
 
         sweep_dir, out_dir = str(config.hydra.sweep.dir), str(config.get("out_dir", "results"))
         records = []
-        for job in sorted(os.listdir(sweep_dir)) if os.path.isdir(sweep_dir) else []:
+        jobs = os.listdir(sweep_dir) if os.path.isdir(sweep_dir) else []
+        for job in sorted(jobs, key=lambda j: (not j.isdigit(), int(j) if j.isdigit() else 0, j)):  # 2 before 10
             key_file = os.path.join(sweep_dir, job, KEY_FILE)
             if os.path.exists(key_file):
                 with open(key_file) as fh:
@@ -184,6 +192,7 @@ def check_plain_keys(args: list[str]) -> None:
     """A one-line InputError, with the near-miss names, for a `key=` or `train|eval|oracle.key=` override without
     `+` that nothing declares (`train.max_step=5`), which Hydra would refuse in several lines; the `+` form is
     checked per job (ddfbench.run.checks.check_known_keys)."""
+    from ddfbench.core.errors import InputError
     from ddfbench.run.checks import CHECKED_SECTIONS, declared_keys
 
     known = declared_keys()
@@ -192,10 +201,49 @@ def check_plain_keys(args: list[str]) -> None:
         if not eq or arg.startswith(("+", "~", "-")) or "/" in path or path.startswith("hydra."):
             continue
         section, _, key = path.partition(".")
+        if not key and section not in (*known[""], "suite") and os.path.isdir(os.path.join(CONF_DIR, section)):
+            raise InputError(f"{arg}: {section} is a config group outside the defaults: use +{arg}")
         if not key:
             plugins.strict_keys("", {section: value}, dict.fromkeys(known[""]), near=True)
         elif section in CHECKED_SECTIONS:
             plugins.strict_keys(section, {key.split(".")[0]: value}, dict.fromkeys(known[section]), near=True)
+
+
+LEVEL_CHOICES = ("model", "capacity", "sampling", "sample_size")  # the overrides that decide what a job's levels set
+
+
+def check_sweep_levels(config: DictConfig) -> None:
+    """check_levels_keep for every job of a basic sweep, before the first one runs: one job composed per model,
+    sampler and their levels. Only when the command line sets a plain key (the sweep's own settings are the
+    experiment's); another sweeper's jobs are checked each as it starts (task)."""
+    from hydra.core.global_hydra import GlobalHydra
+
+    from ddfbench.report.status import sweep_jobs
+
+    task = list(config.hydra.overrides.task)
+    choices = dict(config.hydra.runtime.choices)
+    plain = [o for o in task if (key := o.lstrip("+").split("=", 1)[0]) not in choices and key not in LEVEL_CHOICES
+             and not key.startswith("hydra") and not o.startswith("~")]
+    if not plain or not str(config.hydra.sweeper.get("_target_", "")).endswith("BasicSweeper"):
+        return
+    loader = GlobalHydra.instance().config_loader()
+    master = HydraConfig.instance().cfg
+    seen = set()
+    try:
+        for job in sweep_jobs(loader, config, task)[1]:
+            what = tuple(o for o in job if o.lstrip("+").split("=", 1)[0] in LEVEL_CHOICES)
+            if what in seen:
+                continue
+            seen.add(what)
+            cfg = loader.load_sweep_config(config, job)
+            HydraConfig.instance().set_config(cfg)  # as the job itself resolves its interpolations
+            choices = dict(cfg.hydra.runtime.choices)
+            with open_dict(cfg):
+                del cfg["hydra"]
+            check_levels_keep(OmegaConf.to_container(cfg, resolve=True), choices, job)
+    finally:
+        if master is not None:
+            HydraConfig.instance().set_config(master)
 
 
 EXTRA_OF_EXPERIMENT = {"tune": ("optuna", "tune")}  # experiment -> (module it needs, pip extra that installs it)

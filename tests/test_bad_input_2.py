@@ -87,7 +87,11 @@ def test_a_key_nothing_reads_is_a_failed_record_naming_it(tmp_path, section, key
 @pytest.mark.parametrize("arg,named", [("train.max_step=5", "train.max_step: unknown key (did you mean max_steps"),
                                        ("sed=3", "sed: unknown key (did you mean seed"),
                                        ("eval.n_pointz=3", "eval.n_pointz: unknown key (did you mean n_points?"),
-                                       ("oracle.backnd=embree", "oracle.backnd: unknown key (did you mean backend?")])
+                                       ("oracle.backnd=embree", "oracle.backnd: unknown key (did you mean backend?"),
+                                       ("experiment=ablation", "experiment=ablation: experiment is a config group "
+                                                               "outside the defaults: use +experiment=ablation"),
+                                       ("form=quick", "form=quick: form is a config group outside the defaults: "
+                                                      "use +form=quick")])
 def test_the_same_key_without_plus_is_one_line_before_hydra_composes(arg, named):
     with pytest.raises(InputError) as err:
         cli.check_plain_keys(["model=mesh", arg])

@@ -131,6 +131,11 @@ def test_a_value_the_experiment_s_level_would_replace_stops_the_command_and_capa
         "ddfbench: train.max_steps=5: the level capacity=first_look of experiment default sets train.max_steps to 3000 "
         "for model ddf_tuned, which would replace the value given (drop it, or run without the levels: capacity=null)")
     assert records(tmp_path) == []
+    # in a sweep whose first job has no such level: the whole sweep is checked before its first job runs
+    out = ddfbench(["+experiment=default", "model=mesh,neural_sdf_tuned", "shape=cube", "eval=smoke", "scene=none",
+                    "threads=1", "train.max_steps=5"], tmp_path)
+    assert out.returncode == 1 and "sets train.max_steps to 1000 for model neural_sdf_tuned" in out.stderr
+    assert records(tmp_path) == []
     out = ddfbench([*fast, "train.max_steps=5", "capacity=null"], tmp_path)
     assert out.returncode == 0, out.stderr
     (rec,) = records(tmp_path)

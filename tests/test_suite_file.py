@@ -148,6 +148,14 @@ def test_run_runs_the_sweeps_a_report_asks_for_then_writes_the_report_again(monk
                                f"out_dir={tmp_path}", "quiet=true", "threads=1"]  # into the same out_dir
     assert report[0] == report[1] == ["ddfbench.report", str(tmp_path / "tune_finalists"), "--out",
                                       os.path.join(ROOT, "reports", "tune_finalists")]
+    # a sweep that exited 1 (a job failed): its report is written, the follow-ups wait for a complete selection
+    commands.clear()
+
+    class Failed:
+        returncode = 1
+
+    monkeypatch.setattr(suite.subprocess, "run", lambda cmd, **_: commands.append(cmd) or Failed())
+    assert suite.main(run) == 1 and [c[2] for c in commands] == ["ddfbench", "ddfbench.report"] and len(asked) == 1
 
 
 def test_run_from_reports_restores_each_report_s_committed_records_before_its_sweep(monkeypatch, tmp_path, capsys):

@@ -153,20 +153,27 @@ def test_an_incumbent_that_did_not_converge_on_a_tuning_shape_gives_way_but_a_on
     assert f"| {tie['winner']} | " in finalists.sections(fixed)[0] and "| no | a (kept) |" in finalists.sections(fixed)[0]
 
 
-def separable_b(fresh_seeds=(), b_factor=0.8, b_empty_on=None):
-    """Level b 0.8x level a on every shape in seeds 0-2 (separable), with a and b run again on fresh_seeds, where b is
-    b_factor x a (its seed spread as in 0-2) and empty on shape b_empty_on in its first fresh seed."""
+def separable_b(fresh_seeds=(), b_factor=0.8, b_empty_on=None, a_empty_in=None, fresh_shapes=None):
+    """Level b 0.8x level a on every shape in seeds 0-2 (separable), with a and b run again on fresh_seeds (on
+    fresh_shapes, default all), where b is b_factor x a (its seed spread as in 0-2), b is empty on shape b_empty_on
+    in its first fresh seed and a is empty on every shape in seed a_empty_in."""
     out = []
     for shape_i, shape in enumerate(("cow", "torus", "gear", "open_box")):
         for seed in (0, 1, 2, *fresh_seeds):
+            if seed > 2 and fresh_shapes is not None and shape not in fresh_shapes:
+                continue
             factor = 0.8 if seed < 3 else b_factor
             spread = 1 + 0.1 * (seed % 3) + 0.02 * shape_i  # b's spread differs from a's: the ratios vary a little
-            out.append(rec("m", shape, seed, 1e-3 * (1 + shape_i) * (1 + 0.1 * (seed % 3)), level="a"))
+            out.append(rec("m", shape, seed, 1e-3 * (1 + shape_i) * (1 + 0.1 * (seed % 3)), level="a",
+                           empty=seed == a_empty_in))
             out.append(rec("m", shape, seed, factor * 1e-3 * (1 + shape_i) * spread, level="b",
                            empty=shape == b_empty_on and seed == fresh_seeds[0]))
             if seed < 3:
                 out.append(rec("m", shape, seed, 2e-3 * (1 + shape_i), level="c"))
     return out
+
+
+SWEEP = ["+experiment=tune_finalists", "model=m", "capacity=a,b", "shape=cow,torus,gear,open_box", "seed=3,4,5"]
 
 
 def test_a_separable_winner_replaces_the_incumbent_only_when_confirmed_on_fresh_seeds():
@@ -175,24 +182,44 @@ def test_a_separable_winner_replaces_the_incumbent_only_when_confirmed_on_fresh_
     assert finalists.selection_seeds() == [0, 1, 2]
     (verdict,) = finalists.verdicts(records, finalists.candidate_rows(records))
     assert (verdict["winner"], verdict["runner_up"], verdict["separable"]) == ("b", "a", True)
-    assert finalists.confirmation_sweeps(records) == [[
-        "+experiment=tune_finalists", "model=m", "capacity=a,b",
-        "shape=cow,torus,gear,open_box", "seed=3,4,5"]]
+    assert finalists.confirmation_sweeps(records) == [SWEEP]
     text = finalists.sections(records)[0]
     assert "| yes | a (kept until b is confirmed on fresh seeds) |" in text
-    assert "| m | b / a | – | not run: `python -m ddfbench +experiment=tune_finalists " in text
+    assert f"| m | b / a | 3, 4, 5 | pending: 24 of 24 runs without a record: `python -m ddfbench {' '.join(SWEEP)}`" \
+        in text
     # b again 0.8x a on seeds 3-5: confirmed, and the fresh seeds do not enter the selection's table
     records = separable_b(fresh_seeds=(3, 4, 5))
     assert finalists.confirmation_sweeps(records) == []
     text = finalists.sections(records)[0]
     assert "| yes | b (confirmed) |" in text and "| m | b / a | 3, 4, 5 | 0.8" in text and "| – | yes |" in text
     assert "| m | a | " in text and " | 12 | 100 | – |" in text  # 4 shapes x seeds 0-2, not 24 runs
+    assert "| m | b | gear | 3, 4, 5 | " in text  # the confirmation's runs, listed
     # b level with a on seeds 3-5 (a selection that was seed noise), or empty in one fresh run: a is kept
     for fresh in (separable_b(fresh_seeds=(3, 4, 5), b_factor=1.0),
                   separable_b(fresh_seeds=(3, 4, 5), b_empty_on="gear")):
         text = finalists.sections(fresh)[0]
         assert "| yes | a (kept: b not confirmed) |" in text and "| no |" in text.split("## Confirmation")[1]
     assert "| gear | no |" in finalists.sections(separable_b(fresh_seeds=(3, 4, 5), b_empty_on="gear"))[0]
+
+
+def test_a_confirmation_cut_short_stays_pending_and_an_incumbent_s_miss_is_no_win():
+    # one fresh seed of three, or two shapes of four: pending, and the sweep is asked for again (Hydra skips the done)
+    for part in (separable_b(fresh_seeds=(3,)), separable_b(fresh_seeds=(3, 4, 5), fresh_shapes=("cow", "gear"))):
+        assert finalists.confirmation_sweeps(part) == [SWEEP]
+        text = finalists.sections(part)[0]
+        assert "| yes | a (kept until b is confirmed on fresh seeds) |" in text and "| pending: " in text
+    assert "| pending: 16 of 24 runs without a record" in finalists.sections(separable_b(fresh_seeds=(3,)))[0]
+    # b level with a, and a empty in seed 3 on every shape: a's misses are left out, not counted as b's wins
+    text = finalists.sections(separable_b(fresh_seeds=(3, 4, 5), b_factor=1.0, a_empty_in=3))[0]
+    assert "| yes | a (kept: b not confirmed) |" in text
+    # seeds stored as strings are the same seeds
+    as_text = [{**r, "config": {**r["config"], "seed": str(r["config"]["seed"])}} for r in separable_b()]
+    assert finalists.confirmation_sweeps(as_text) == [SWEEP]
+    other = separable_b(fresh_seeds=(3, 4, 5)) + [rec("g", "cow", 7, 1e-3, level="a"), rec("g", "cow", 8, 1e-3, level="b")]
+    assert "2 runs of seeds outside the selection belong to no confirmation (models: g; seeds 7, 8)" in \
+        finalists.sections(other)[0]
+    fresh_only = [r for r in separable_b(fresh_seeds=(3, 4, 5)) if r["config"]["seed"] > 2]
+    assert "No record of the selection seeds 0, 1, 2" in finalists.sections(fresh_only)[0]
 
 
 def test_the_committed_protocol_run_needed_exactly_the_confirmation_that_was_run():

@@ -131,7 +131,10 @@ def write_report(source: str, out_dir: str, note: str | None = None,
     if len(shas) > 1 and not allow_mixed_commits:
         raise MixedCommits(f"{source}: records from {len(shas)} code commits ({', '.join(shas)}); rerun them "
                            "on one commit or pass --allow-mixed-commits")
-    df = summarize(records)
+    experiment = _experiment(records, source)
+    kind = _experiment_file(records, experiment)
+    # the tuning protocol's table holds the seeds its candidates are scored on; its confirmation's runs have a section
+    df = summarize(finalists.selection_records(records) if kind == "tune_finalists" else records)
     os.makedirs(out_dir, exist_ok=True)
     if os.path.abspath(source) != os.path.abspath(os.path.join(out_dir, compact.FILE)):
         compact.write_compact(records, os.path.join(out_dir, compact.FILE))
@@ -150,8 +153,6 @@ def write_report(source: str, out_dir: str, note: str | None = None,
         fh.write(to_latex(df))
     to_csv(df, os.path.join(out_dir, "table.csv"))
     per_run(records).to_csv(os.path.join(out_dir, "runs.csv"), index=False)
-    experiment = _experiment(records, source)
-    kind = _experiment_file(records, experiment)
     chosen = kinds if kinds is not None else plots_for(kind)
     written = write_plots(records, out_dir, chosen) if draw else \
         [p for k in chosen for p in (os.path.join(out_dir, f"{k}.{ext}") for ext in ("png", "pdf")) if os.path.isfile(p)]

@@ -29,7 +29,7 @@ from ddfbench.core.plugins import CONF_DIR
 from ddfbench.evaluate.metric_registry import by_name
 from ddfbench.report.across_shapes import OverShapes, fmt, geometric, ratio, shape_means
 from ddfbench.report.paired import log_ratio
-from ddfbench.report.records import Record, ok_records, shape_name
+from ddfbench.report.records import Record, no_result, ok_records, shape_name
 from ddfbench.report.shape_suite import cells_without_result
 
 CHAMFER = "chamfer_l2"
@@ -43,14 +43,29 @@ def selection_seeds() -> list[int]:
     return [int(s) for s in str(cfg.hydra.sweeper.params.seed).split(",")]
 
 
+def fresh_seeds(chosen: list[int]) -> list[int]:
+    """The confirmation's seeds: as many as the selection's, after them (3, 4, 5)."""
+    return [max(chosen) + 1 + i for i in range(len(chosen))]
+
+
 def seed(rec: Record) -> Any:
-    return (rec.get("config") or {}).get("seed")
+    """The record's seed as an int (as the config gave it where it is not one)."""
+    value = (rec.get("config") or {}).get("seed")
+    try:
+        return int(value)
+    except (TypeError, ValueError):
+        return value
 
 
 def split_by_seed(records: list[Record]) -> tuple[list[int], list[Record], list[Record]]:
-    """(the selection seeds, the records of those seeds, the records of fresh seeds: the confirmation's)."""
+    """(the selection seeds, the records of those seeds, the records of other seeds: the confirmation's)."""
     chosen = selection_seeds()
     return chosen, [r for r in records if seed(r) in chosen], [r for r in records if seed(r) not in chosen]
+
+
+def selection_records(records: list[Record]) -> list[Record]:
+    """The records the candidates are scored on (the report's main table)."""
+    return split_by_seed(records)[1]
 
 
 def candidate(rec: Record) -> tuple[str, str]:
@@ -119,40 +134,58 @@ def needs_confirmation(verdict: dict[str, Any]) -> bool:
     return verdict["separable"] and verdict["winner"] != INCUMBENT and verdict["incumbent_eligible"]
 
 
-def confirmation(fresh: list[Record], verdict: dict[str, Any]) -> dict[str, Any] | None:
-    """The winner against the incumbent on the fresh seeds' records (None when there are none): by-shape and by-run
-    CD-L2 ratio winner / incumbent, the shapes where a winner's fresh run gave no result, and confirmed."""
+def confirmation(selection: list[Record], fresh: list[Record], verdict: dict[str, Any],
+                 chosen: list[int]) -> dict[str, Any]:
+    """The winner against the incumbent on the fresh seeds: their grid (the tuning shapes the model ran x
+    fresh_seeds x both levels: runs) and how many of them have no ok record yet (missing: pending while > 0);
+    by-shape and by-run CD-L2 ratio winner / incumbent over the runs that gave a result; the shapes where a winner's
+    run gave none; confirmed: nothing missing, a result in every winner's run, every shape compared and the by-shape
+    interval below 1."""
     model, win = verdict["model"], verdict["winner"]
-    mine = [r for r in fresh if r.get("model") == model]
-    if not any(candidate(r)[1] == win for r in mine):
-        return None
+    shapes = list(dict.fromkeys(shape_name(r) for r in selection if r.get("model") == model))
+    seeds = fresh_seeds(chosen)
+    mine = [r for r in fresh if r.get("model") == model and seed(r) in seeds
+            and candidate(r)[1] in (INCUMBENT, win) and shape_name(r) in shapes]
+    done = {(candidate(r)[1], shape_name(r), seed(r)) for r in ok_records(mine)}
+    missing = 2 * len(shapes) * len(seeds) - len(done)
     read = by_name()[CHAMFER].read
 
     def per_shape(level: str) -> dict[str, float]:
-        return shape_means((shape_name(r), read(r)) for r in ok_records(mine) if candidate(r)[1] == level)
+        return shape_means((shape_name(r), read(r)) for r in ok_records(mine)
+                           if candidate(r)[1] == level and not no_result(r))
 
     misses = sorted(c["shape"] for c in cells_without_result([r for r in mine if candidate(r)[1] == win]))
     by_shape = ratio(per_shape(win), per_shape(INCUMBENT))
-    return {"by_shape": by_shape, "by_run": _by_run(mine, model, win, INCUMBENT), "no_result_on": misses,
-            "seeds": sorted({seed(r) for r in mine}),
-            "confirmed": not misses and math.isfinite(by_shape.hi) and by_shape.hi < 1}
+    separable = math.isfinite(by_shape.hi) and by_shape.hi < 1
+    return {"seeds": seeds, "shapes": shapes, "runs": 2 * len(shapes) * len(seeds), "missing": missing,
+            "records": mine, "by_shape": by_shape, "no_result_on": misses,
+            "by_run": _by_run([r for r in mine if not no_result(r)], model, win, INCUMBENT),
+            "confirmed": not missing and not misses and by_shape.n == len(shapes) and separable}
 
 
-def _confirmation_sweep(verdict: dict[str, Any], selection: list[Record], chosen: list[int]) -> list[str]:
-    """The overrides of the sweep that confirms a verdict's winner: the winner and the incumbent on the tuning shapes
-    its model ran, on as many seeds after the selection's."""
-    shapes = ",".join(dict.fromkeys(shape_name(r) for r in selection if r.get("model") == verdict["model"]))
-    seeds = ",".join(str(max(chosen) + 1 + i) for i in range(len(chosen)))
+def _confirmation_sweep(verdict: dict[str, Any], check: dict[str, Any]) -> list[str]:
+    """The overrides of the sweep that confirms a verdict's winner (check: its confirmation)."""
     return [f"+experiment={EXPERIMENT}", f"model={verdict['model']}", f"capacity={INCUMBENT},{verdict['winner']}",
-            f"shape={shapes}", f"seed={seeds}"]  # on the command line: they replace the experiment's sweep
+            f"shape={','.join(check['shapes'])}", f"seed={','.join(map(str, check['seeds']))}"]
+
+
+def confirmations(records: list[Record]) -> list[dict[str, Any]]:
+    """The verdicts on the selection seeds, each that proposes a change of preset with its confirmation (key
+    "confirm")."""
+    chosen, selection, fresh = split_by_seed(records)
+    out = verdicts(selection, candidate_rows(selection))
+    for v in out:
+        if needs_confirmation(v):
+            v["confirm"] = confirmation(selection, fresh, v, chosen)
+    return out
 
 
 def confirmation_sweeps(records: list[Record]) -> list[list[str]]:
-    """The overrides of each sweep the protocol still needs: one per model whose change of preset has no records on
-    fresh seeds yet (python -m ddfbench OVERRIDES ... into the same results folder, then the report again)."""
-    chosen, selection, fresh = split_by_seed(records)
-    return [_confirmation_sweep(v, selection, chosen) for v in verdicts(selection, candidate_rows(selection))
-            if needs_confirmation(v) and confirmation(fresh, v) is None]
+    """The overrides of each sweep the protocol still needs: one per model whose confirmation has runs without an ok
+    record (python -m ddfbench OVERRIDES ... into the same results folder, which skips the runs done; then the
+    report again)."""
+    return [_confirmation_sweep(v, v["confirm"]) for v in confirmations(records)
+            if "confirm" in v and v["confirm"]["missing"]]
 
 
 def preset_to_use(verdict: dict[str, Any]) -> str:
@@ -164,7 +197,7 @@ def preset_to_use(verdict: dict[str, Any]) -> str:
         return win
     if needs_confirmation(verdict):
         check = verdict.get("confirm")
-        if check is None:
+        if check is None or check["missing"]:
             return f"{INCUMBENT} (kept until {win} is confirmed on fresh seeds)"
         return f"{win} (confirmed)" if check["confirmed"] else f"{INCUMBENT} (kept: {win} not confirmed)"
     if verdict["incumbent_eligible"]:
@@ -175,12 +208,15 @@ def preset_to_use(verdict: dict[str, Any]) -> str:
 def sections(records: list[Record]) -> list[str]:
     """The markdown of the candidates' table, the verdicts and the confirmations (records of seeds outside
     selection_seeds are the confirmation's)."""
-    chosen, selection, fresh = split_by_seed(records)
+    chosen, selection, _ = split_by_seed(records)
     rows = candidate_rows(selection)
     lines = ["## Candidates on the tuning shapes", "",
+             *([f"No record of the selection seeds {', '.join(map(str, chosen))} (conf/experiment/{EXPERIMENT}.yaml): "
+                "no candidate is scored.", ""] if not selection else []),
              f"Seeds {', '.join(map(str, chosen))}. score: geometric mean over the tuning shapes of the mean CD-L2 "
              "×10³ over seeds, with the t interval of the mean log over shapes (n: shapes where every run gave a "
-             "result). Fixed work: steps as run.", "",
+             "result). Fixed work: steps as run. The table above holds these seeds' runs; the confirmation's, on "
+             "fresh seeds, are in its section.", "",
              "| model | level | score CD-L2 ×10³ [95 %] | runs | steps | a run with no result on |",
              "|---|---|---|---|---|---|"]
     lines += [f"| {r['model']} | {r['level']} | {fmt(r['score'], 1e3)} | {r['runs']} | {r['steps']:,} | "
@@ -199,32 +235,55 @@ def sections(records: list[Record]) -> list[str]:
               "",
               "| model | winner | runner-up | by shape [95 %] | by run [95 %] | separable | preset to use |",
               "|---|---|---|---|---|---|---|"]
-    checks = []
-    for v in verdicts(selection, rows):
-        if needs_confirmation(v):
-            v["confirm"] = confirmation(fresh, v)
-            checks.append(v)
+    verdict_list = confirmations(records)
+    for v in verdict_list:
         if v["runner_up"] is None:
             winner = v["winner"] or "no candidate had a result in every run"
             lines.append(f"| {v['model']} | {winner} | – | – | – | – | {preset_to_use(v)} |")
             continue
         lines.append(f"| {v['model']} | {v['winner']} | {v['runner_up']} | {fmt(v['by_shape'])} | "
                      f"{fmt(v['by_run'])} | {'yes' if v['separable'] else 'no'} | {preset_to_use(v)} |")
+    checks = [v for v in verdict_list if "confirm" in v]
     if checks:
         lines += ["", "## Confirmation on fresh seeds", "",
-                  "Each separable winner that would replace the incumbent, against the incumbent on seeds the "
-                  "selection did not use: CD-L2 ratio winner / incumbent by shape and by run. Confirmed when the "
-                  "winner has a result in every fresh run and the by-shape interval lies below 1.", "",
+                  "Each separable winner that would replace the incumbent, against the incumbent on the tuning shapes "
+                  "with seeds the selection did not use: CD-L2 ratio winner / incumbent by shape and by run, over the "
+                  "runs that gave a result. Confirmed when every run of that grid has a record, the winner has a "
+                  "result in each of its runs and the by-shape interval over every shape lies below 1; pending while "
+                  "runs are missing (the command runs them).", "",
                   "| model | winner / incumbent | seeds | by shape [95 %] | by run [95 %] | "
                   "winner's run with no result on | confirmed |", "|---|---|---|---|---|---|---|"]
         for v in checks:
             c = v["confirm"]
-            if c is None:
-                command = " ".join(["python -m ddfbench", *_confirmation_sweep(v, selection, chosen)])
-                lines.append(f"| {v['model']} | {v['winner']} / {INCUMBENT} | – | not run: `{command}` | – | – "
-                             "| – |")
+            seeds = ", ".join(map(str, c["seeds"]))
+            if c["missing"]:
+                command = " ".join(["python -m ddfbench", *_confirmation_sweep(v, c)])
+                lines.append(f"| {v['model']} | {v['winner']} / {INCUMBENT} | {seeds} | pending: {c['missing']} of "
+                             f"{c['runs']} runs without a record: `{command}` | – | – | – |")
                 continue
-            lines.append(f"| {v['model']} | {v['winner']} / {INCUMBENT} | {', '.join(map(str, c['seeds']))} | "
-                         f"{fmt(c['by_shape'])} | {fmt(c['by_run'])} | {', '.join(c['no_result_on']) or '–'} | "
+            lines.append(f"| {v['model']} | {v['winner']} / {INCUMBENT} | {seeds} | {fmt(c['by_shape'])} | "
+                         f"{fmt(c['by_run'])} | {', '.join(c['no_result_on']) or '–'} | "
                          f"{'yes' if c['confirmed'] else 'no'} |")
+        lines += ["", "The confirmation's runs (CD-L2 ×10³: mean over the runs with a result):", "",
+                  "| model | level | shape | seeds | CD-L2 ×10³ | no result | record keys |",
+                  "|---|---|---|---|---|---|---|"]
+        read = by_name()[CHAMFER].read
+        for v in checks:
+            for level in (INCUMBENT, v["winner"]):
+                for shape in v["confirm"]["shapes"]:
+                    runs = sorted((r for r in ok_records(v["confirm"]["records"])
+                                   if candidate(r)[1] == level and shape_name(r) == shape), key=seed)
+                    if not runs:
+                        continue
+                    kept = shape_means((shape, read(r)) for r in runs if not no_result(r)).get(shape, math.nan)
+                    lines.append(f"| {v['model']} | {level} | {shape} | {', '.join(str(seed(r)) for r in runs)} | "
+                                 f"{kept * 1e3:.3g} | {sum(no_result(r) for r in runs)} | "
+                                 f"{' '.join(str(r.get('key')) for r in runs)} |")
+    used = {id(r) for v in checks for r in v["confirm"]["records"]}
+    other = [r for r in split_by_seed(records)[2] if id(r) not in used]
+    if other:
+        lines += ["", f"{len(other)} runs of seeds outside the selection belong to no confirmation (models: "
+                      f"{', '.join(sorted({str(r.get('model')) for r in other}))}; seeds "
+                      f"{', '.join(map(str, sorted({seed(r) for r in other}, key=str)))}): in runs.csv and the "
+                      "records, in no table here."]
     return ["\n".join(lines) + "\n"]

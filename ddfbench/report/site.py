@@ -244,10 +244,11 @@ def main(argv: list[str] | None = None) -> int:
         print(f"ddfbench.report.site: --out {args.out}: is a file, not a folder", file=sys.stderr)
         return 2
     try:
-        got = write_site(args.reports, args.out)
-    except OSError as exc:  # a folder that cannot be made or written
-        print(f"ddfbench.report.site: --out {args.out}: cannot be written ({exc.strerror or exc})", file=sys.stderr)
+        os.makedirs(args.out, exist_ok=True)
+    except OSError as exc:
+        print(f"ddfbench.report.site: --out {args.out}: cannot be made ({exc.strerror or exc})", file=sys.stderr)
         return 2
+    got = write_site(args.reports, args.out)
     print(f"wrote {args.out}/index.html: {got['runs']} run points, {got['pages']} report pages, "
           f"{got['galleries']} galleries", flush=True)
     if args.screenshot:

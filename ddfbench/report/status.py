@@ -93,26 +93,33 @@ def _master_config(loader: Any, records_dir: str, overrides: list[str]) -> tuple
     return master, "the overrides " + " ".join(overrides)
 
 
+def sweep_jobs(loader: Any, master: DictConfig, overrides: list[str]) -> tuple[set[str], list[list[str]]]:
+    """(the keys the sweep varies, each job's overrides in Hydra's order) as Hydra's basic sweeper expands the master
+    config's sweep params and then overrides (an override of a params key replaces it)."""
+    from hydra._internal.core_plugins.basic_sweeper import BasicSweeper
+    from hydra.core.override_parser.overrides_parser import OverridesParser
+
+    params = [f"{k}={v}" for k, v in (master.hydra.sweeper.get("params") or {}).items()]
+    parsed = OverridesParser.create(config_loader=loader).parse_overrides(params + overrides)
+    swept = {o.get_key_element() for o in parsed if o.is_sweep_override()}
+    return swept, [list(job) for batch in BasicSweeper.split_arguments(parsed, None) for job in batch]
+
+
 def expected_grid(records_dir: str, overrides: list[str]) -> tuple[list[Job], str]:
     """Every job of the sweep (in Hydra's order) with its record key, and where the grid came from."""
     from hydra import initialize_config_dir
-    from hydra._internal.core_plugins.basic_sweeper import BasicSweeper
     from hydra.core.global_hydra import GlobalHydra
-    from hydra.core.override_parser.overrides_parser import OverridesParser
 
     with initialize_config_dir(CONF_DIR, version_base="1.3", job_name="ddfbench_status"):
         loader = GlobalHydra.instance().config_loader()
         master, source = _master_config(loader, records_dir, overrides)
         if not str(master.hydra.sweeper.get("_target_", "")).endswith("BasicSweeper"):
             raise InputError(f"hydra.sweeper={master.hydra.sweeper._target_}: --status expands only Hydra's basic sweeper")
-        params = [f"{k}={v}" for k, v in (master.hydra.sweeper.get("params") or {}).items()]
-        parsed = OverridesParser.create(config_loader=loader).parse_overrides(params + list(master.hydra.overrides.task))
-        swept = {o.get_key_element() for o in parsed if o.is_sweep_override()}
+        swept, expanded = sweep_jobs(loader, master, list(master.hydra.overrides.task))
         jobs = []
-        for batch in BasicSweeper.split_arguments(parsed, None):
-            for job_overrides in batch:
-                key = runs.config_key(compose_job(loader, master, list(job_overrides))[0])
-                jobs.append(Job([o for o in job_overrides if o.split("=", 1)[0] in swept], key))
+        for job_overrides in expanded:
+            key = runs.config_key(compose_job(loader, master, job_overrides)[0])
+            jobs.append(Job([o for o in job_overrides if o.split("=", 1)[0] in swept], key))
     return jobs, source
 
 

@@ -30,7 +30,7 @@ from ddfbench.core import plugins
 from ddfbench.core.errors import InputError
 from ddfbench.core.plugins import CONF_DIR
 from ddfbench.report import compact, finalists
-from ddfbench.report.status import compose_job
+from ddfbench.report.status import compose_job, sweep_jobs
 from ddfbench.run import runs
 
 ROOT = os.path.dirname(CONF_DIR)
@@ -98,9 +98,7 @@ class Sweep:
 def expand(entry: Entry) -> Sweep:
     """The entry's sweep: its jobs per model and level, and its fit budget."""
     from hydra import initialize_config_dir
-    from hydra._internal.core_plugins.basic_sweeper import BasicSweeper
     from hydra.core.global_hydra import GlobalHydra
-    from hydra.core.override_parser.overrides_parser import OverridesParser
     from hydra.types import RunMode
 
     GlobalHydra.instance().clear()
@@ -108,17 +106,14 @@ def expand(entry: Entry) -> Sweep:
         loader = GlobalHydra.instance().config_loader()
         overrides = [f"+experiment={entry.experiment}", *entry.overrides]
         master = loader.load_configuration("config", overrides, run_mode=RunMode.MULTIRUN)
-        params = [f"{k}={v}" for k, v in (master.hydra.sweeper.get("params") or {}).items()]
-        parsed = OverridesParser.create(config_loader=loader).parse_overrides(params + overrides)
         jobs: dict[Job, int] = {}
         budgets: dict[tuple[str, ...], tuple[str, str, str, float, float]] = {}
-        for batch in BasicSweeper.split_arguments(parsed, None):
-            for overrides in batch:
-                what = tuple(o for o in overrides if _sets_budget(o.split("=", 1)[0].lstrip("+")))
-                if what not in budgets:  # compose one job per model, level and train overrides
-                    budgets[what] = _budget(*compose_job(loader, master, list(overrides)), list(overrides))
-                job = Job(*budgets[what])
-                jobs[job] = jobs.get(job, 0) + 1
+        for job_overrides in sweep_jobs(loader, master, overrides)[1]:
+            what = tuple(o for o in job_overrides if _sets_budget(o.split("=", 1)[0].lstrip("+")))
+            if what not in budgets:  # compose one job per model, level and train overrides
+                budgets[what] = _budget(*compose_job(loader, master, job_overrides), job_overrides)
+            job = Job(*budgets[what])
+            jobs[job] = jobs.get(job, 0) + 1
         return Sweep(jobs)
 
 
@@ -251,6 +246,8 @@ def print_plan(rows: list[dict[str, Any]]) -> None:
         unknown = f" + {len(r['unknown'])} model(s) never measured ({', '.join(r['unknown'])})" if r["unknown"] else ""
         print(f"{r['experiment']:<16} {r['jobs']:>5} jobs  {r['cpu_hours']:6.2f} CPU-h{unknown}  -> {r['report']}"
               f"  (cost from {', '.join(r['sources']) or 'nothing'})")
+        if r["experiment"] in FOLLOW_UPS:
+            print(f"{'':<16} + the sweeps its report asks for once it has run (not counted)")
     total = sum(r["cpu_hours"] for r in rows)
     print(f"{'total':<16} {sum(r['jobs'] for r in rows):>5} jobs  {total:6.2f} CPU-h (wall per job as recorded, "
           "one job at a time; more with unmeasured models)")
@@ -282,13 +279,18 @@ def run(suite: str, tier: str, results: str, extra: list[str] | None = None, fro
         cmd = [sys.executable, "-m", "ddfbench", f"+experiment={entry.experiment}", f"out_dir={results}", "quiet=true",
                *entry.overrides, *(extra or [])]
         print("$", " ".join(cmd[1:]), flush=True)
-        rc = max(rc, subprocess.run(cmd).returncode)
+        swept = subprocess.run(cmd).returncode
+        rc = max(rc, swept)
         records_dir = os.path.join(results, str(OmegaConf.load(os.path.join(
             CONF_DIR, "experiment", f"{entry.experiment}.yaml")).get("experiment_name") or entry.experiment))
         report = [sys.executable, "-m", "ddfbench.report", records_dir, "--out", os.path.join(ROOT, entry.report)]
         rc = max(rc, subprocess.run(report).returncode)
         follow_up = FOLLOW_UPS.get(entry.experiment)
-        sweeps = follow_up(compact.load_records(records_dir)) if follow_up and os.path.isdir(records_dir) else []
+        if follow_up and swept:  # from a selection with failed or missing runs: run the experiment again first
+            print(f"{entry.experiment}: its sweep exited {swept}; the sweeps its report asks for are not run",
+                  flush=True)
+        sweeps = follow_up(compact.load_records(records_dir)) if follow_up and not swept and \
+            os.path.isdir(records_dir) else []
         for overrides in sweeps:  # complete sweeps of their own: the entry's overrides are not added
             cmd = [sys.executable, "-m", "ddfbench", *overrides, f"out_dir={results}", "quiet=true", *(extra or [])]
             print("$", " ".join(cmd[1:]), flush=True)
