@@ -18,7 +18,7 @@ import hydra
 from hydra.core.hydra_config import HydraConfig
 from hydra.experimental.callback import Callback
 from hydra.types import RunMode
-from omegaconf import DictConfig, OmegaConf, open_dict
+from omegaconf import DictConfig, OmegaConf
 
 from ddfbench.core import plugins
 from ddfbench.core.plugins import CONF_DIR  # plugins registers the `members` resolver the experiments use
@@ -213,37 +213,26 @@ LEVEL_CHOICES = ("model", "capacity", "sampling", "sample_size")  # the override
 
 
 def check_sweep_levels(config: DictConfig) -> None:
-    """check_levels_keep for every job of a basic sweep, before the first one runs: one job composed per model,
-    sampler and their levels. Only when the command line sets a plain key (the sweep's own settings are the
-    experiment's); another sweeper's jobs are checked each as it starts (task)."""
+    """check_levels_keep for every job of a basic sweep, before the first one runs: one job composed per distinct
+    model, sampler, level and swept plain value. Only when the command line sets a plain key (the sweep's own
+    settings are the experiment's); another sweeper's jobs are checked each as it starts (task)."""
     from hydra.core.global_hydra import GlobalHydra
 
-    from ddfbench.report.status import sweep_jobs
+    from ddfbench.report.status import compose_plain, sweep_jobs
 
     task = list(config.hydra.overrides.task)
     choices = dict(config.hydra.runtime.choices)
-    plain = [o for o in task if (key := o.lstrip("+").split("=", 1)[0]) not in choices and key not in LEVEL_CHOICES
-             and not key.startswith("hydra") and not o.startswith("~")]
+    plain = {key for o in task if (key := o.lstrip("+").split("=", 1)[0]) not in choices
+             and key not in LEVEL_CHOICES and not key.startswith("hydra") and not o.startswith("~")}
     if not plain or not str(config.hydra.sweeper.get("_target_", "")).endswith("BasicSweeper"):
         return
     loader = GlobalHydra.instance().config_loader()
-    master = HydraConfig.instance().cfg
     seen = set()
-    try:
-        for job in sweep_jobs(loader, config, task)[1]:
-            what = tuple(o for o in job if o.lstrip("+").split("=", 1)[0] in LEVEL_CHOICES)
-            if what in seen:
-                continue
+    for job in sweep_jobs(loader, config, task)[1]:
+        what = tuple(o for o in job if o.lstrip("+").split("=", 1)[0] in (*LEVEL_CHOICES, *plain))
+        if what not in seen:
             seen.add(what)
-            cfg = loader.load_sweep_config(config, job)
-            HydraConfig.instance().set_config(cfg)  # as the job itself resolves its interpolations
-            choices = dict(cfg.hydra.runtime.choices)
-            with open_dict(cfg):
-                del cfg["hydra"]
-            check_levels_keep(OmegaConf.to_container(cfg, resolve=True), choices, job)
-    finally:
-        if master is not None:
-            HydraConfig.instance().set_config(master)
+            check_levels_keep(*compose_plain(loader, config, job), job)
 
 
 EXTRA_OF_EXPERIMENT = {"tune": ("optuna", "tune")}  # experiment -> (module it needs, pip extra that installs it)

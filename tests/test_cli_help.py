@@ -1,5 +1,7 @@
 """`python -m ddfbench +experiment=NAME --help` describes the experiment: its file's header, what it sweeps and
-how many jobs the given arguments make."""
+how many jobs the given arguments make; a sweep ends with one line on its failed jobs."""
+
+import pytest
 
 from ddfbench.cli import experiment_help
 
@@ -20,3 +22,25 @@ def test_an_optimizing_sweep_is_described_without_a_grid():
 def test_without_an_experiment_hydra_answers():
     assert experiment_help(["model=mesh", "--help"]) is None
     assert experiment_help(["+experiment=no_such_one", "--help"]) is None
+
+
+def test_a_sweep_with_failed_jobs_names_how_many_and_the_first_by_job_number(tmp_path, capsys):
+    from omegaconf import OmegaConf
+
+    from ddfbench.cli import KEY_FILE, SweepTableCallback
+    from ddfbench.run import runs
+
+    sweep, out = tmp_path / "sweep", tmp_path / "out"
+    for job, status in (("10", "failed"), ("2", "failed"), ("3", "ok")):  # job 10 sorts before 2 as text
+        key = f"k{job}"
+        (sweep / job).mkdir(parents=True)
+        (sweep / job / KEY_FILE).write_text(f"e/{key}\n")
+        (out / "e" / key).mkdir(parents=True)
+        runs.write_json_atomic(str(out / "e" / key / runs.RECORD_FILE), {
+            "key": key, "experiment": "e", "status": status, "model": f"m{job}", "shape": {"name": "cube"},
+            "error": None if status == "ok" else f"boom {job}", "metrics": {}, "cost": {}, "config": {}})
+    config = OmegaConf.create({"hydra": {"sweep": {"dir": str(sweep)}}, "out_dir": str(out), "quiet": True})
+    with pytest.raises(SystemExit) as stop:
+        SweepTableCallback().on_multirun_end(config)
+    assert stop.value.code == 1
+    assert capsys.readouterr().err == "ddfbench: 2 of 3 jobs failed (first: m2 on cube: boom 2)\n"

@@ -13,6 +13,7 @@ import pytest
 import trimesh
 
 from ddfbench.core.errors import InputError
+from ddfbench.report import suite
 from ddfbench.report.__main__ import main as report_main
 from ddfbench.report.status import format_status, sweep_status
 from ddfbench.run.launch import available_cores, job_device, job_settings, job_threads
@@ -208,6 +209,7 @@ def test_killed_sweep_resumes_without_loss_or_duplicates(tmp_path):
     assert {j.key for j in st.done} == set(before) and not st.failed
     assert [j.key for j in sweep_status(records_dir, SMOKE).expected] == [j.key for j in st.expected]  # from overrides
     assert len(st.missing) == N_RUNS - len(before)
+    assert not suite.sweep_ran_through(records_dir, -9)  # cut short: no follow-up sweep starts from it
 
     launch(tmp_path)  # the same sweep again (serial this time: keys do not depend on the launcher)
     after = by_key(tmp_path)
@@ -239,6 +241,7 @@ def test_failed_runs_rerun_and_status_reports_them(tmp_path, capsys):
         assert str(mesh) in error and "\n" not in error
         assert f"[{job.key}]  {error}" in text
     assert "done 0  failed 2  missing 0" in text
+    assert suite.sweep_ran_through(records_dir, 1)  # every job has a record, failed ones too: follow-ups may run
 
     trimesh.creation.box().export(mesh)  # the cause is fixed: the same sweep runs them again, keyed on the
     launch(tmp_path, *args)                # file's contents (a new input is a new run; the failed ones stay as theirs)

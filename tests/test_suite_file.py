@@ -137,6 +137,8 @@ def test_run_runs_the_sweeps_a_report_asks_for_then_writes_the_report_again(monk
 
     monkeypatch.setattr(suite.subprocess, "run", lambda cmd, **_: commands.append(cmd) or Done())
     monkeypatch.setitem(suite.FOLLOW_UPS, "tune_finalists", confirmation)
+    ran_through = {"value": True}  # every job of the sweep has a record (status.sweep_status: nothing missing)
+    monkeypatch.setattr(suite, "sweep_ran_through", lambda folder, code: ran_through["value"])
     run = ["run", "v1", "--tier", "long", "--only", "tune_finalists", "--results", str(tmp_path), "--", "threads=1"]
     assert suite.main(run) == 0 and commands[1][2] == "ddfbench.report" and len(commands) == 2  # no records: none
     commands.clear()
@@ -148,13 +150,14 @@ def test_run_runs_the_sweeps_a_report_asks_for_then_writes_the_report_again(monk
                                f"out_dir={tmp_path}", "quiet=true", "threads=1"]  # into the same out_dir
     assert report[0] == report[1] == ["ddfbench.report", str(tmp_path / "tune_finalists"), "--out",
                                       os.path.join(ROOT, "reports", "tune_finalists")]
-    # a sweep that exited 1 (a job failed): its report is written, the follow-ups wait for a complete selection
+    # a sweep cut short (killed: a negative code): its report is written, the follow-ups wait for all its runs
     commands.clear()
+    ran_through["value"] = False
 
-    class Failed:
-        returncode = 1
+    class Killed:
+        returncode = -9
 
-    monkeypatch.setattr(suite.subprocess, "run", lambda cmd, **_: commands.append(cmd) or Failed())
+    monkeypatch.setattr(suite.subprocess, "run", lambda cmd, **_: commands.append(cmd) or Killed())
     assert suite.main(run) == 1 and [c[2] for c in commands] == ["ddfbench", "ddfbench.report"] and len(asked) == 1
 
 
@@ -195,3 +198,11 @@ def test_the_version_is_the_suite_s_and_the_changelog_opens_with_it():
     with open(os.path.join(ROOT, "CHANGELOG.md")) as fh:
         first = next(line for line in fh if line.startswith("## "))
     assert first.startswith(f"## {ddfbench.__version__} — suite v{suite_version}")
+
+
+def test_the_plan_says_which_experiments_add_sweeps_it_does_not_count(capsys):
+    row = {"jobs": 4, "cpu_hours": 1.0, "unknown": [], "report": "r", "sources": ["r"]}
+    suite.print_plan([{**row, "experiment": "tune_finalists"}, {**row, "experiment": "default"}])
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[1].strip() == "+ the sweeps its report asks for once it has run (not counted)"
+    assert lines[2].startswith("default") and lines[3].startswith("total")  # none after default

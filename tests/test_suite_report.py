@@ -164,8 +164,8 @@ def separable_b(fresh_seeds=(), b_factor=0.8, b_empty_on=None, a_empty_in=None, 
                 continue
             factor = 0.8 if seed < 3 else b_factor
             spread = 1 + 0.1 * (seed % 3) + 0.02 * shape_i  # b's spread differs from a's: the ratios vary a little
-            out.append(rec("m", shape, seed, 1e-3 * (1 + shape_i) * (1 + 0.1 * (seed % 3)), level="a",
-                           empty=seed == a_empty_in))
+            out.append(rec("m", shape, seed, 1.0 if seed == a_empty_in else 1e-3 * (1 + shape_i) * (1 + 0.1 * (seed % 3)),
+                           level="a", empty=seed == a_empty_in))  # an empty run's chamfer is the penalty
             out.append(rec("m", shape, seed, factor * 1e-3 * (1 + shape_i) * spread, level="b",
                            empty=shape == b_empty_on and seed == fresh_seeds[0]))
             if seed < 3:
@@ -212,6 +212,23 @@ def test_a_confirmation_cut_short_stays_pending_and_an_incumbent_s_miss_is_no_wi
     # b level with a, and a empty in seed 3 on every shape: a's misses are left out, not counted as b's wins
     text = finalists.sections(separable_b(fresh_seeds=(3, 4, 5), b_factor=1.0, a_empty_in=3))[0]
     assert "| yes | a (kept: b not confirmed) |" in text
+    # a winner's run that failed (a divergence fails again on every rerun): not pending, not confirmed, listed
+    failed = [{**r, "status": "failed"} if (r["config"]["capacity"], r["shape"]["name"], r["config"]["seed"])
+              == ("b", "gear", 3) else r for r in separable_b(fresh_seeds=(3, 4, 5))]
+    assert finalists.confirmation_sweeps(failed) == []
+    text = finalists.sections(failed)[0]
+    assert "| yes | a (kept: b not confirmed) |" in text and "| m | b | gear | 3, 4, 5 | " in text
+    assert "| gear | no |" in text and "| pending: " not in text
+    # the preset with no result on the gear in every fresh seed: that shape counts for the winner, as in the selection
+    lost = [{**r, "metrics": {**r["metrics"], "chamfer_l2": 1.0, "empty_reconstruction": True}}
+            if r["config"]["capacity"] == "a" and r["shape"]["name"] == "gear" and r["config"]["seed"] > 2 else r
+            for r in separable_b(fresh_seeds=(3, 4, 5))]
+    assert "| yes | b (confirmed) |" in finalists.sections(lost)[0]
+    # a chamfer missing from the preset's gear runs (not a miss): the gear is not compared, so not confirmed
+    unread = [{**r, "metrics": {k: v for k, v in r["metrics"].items() if k != "chamfer_l2"}}
+              if r["config"]["capacity"] == "a" and r["shape"]["name"] == "gear" and r["config"]["seed"] > 2 else r
+              for r in separable_b(fresh_seeds=(3, 4, 5))]
+    assert "| yes | a (kept: b not confirmed) |" in finalists.sections(unread)[0]
     # seeds stored as strings are the same seeds
     as_text = [{**r, "config": {**r["config"], "seed": str(r["config"]["seed"])}} for r in separable_b()]
     assert finalists.confirmation_sweeps(as_text) == [SWEEP]

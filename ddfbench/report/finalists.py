@@ -136,31 +136,36 @@ def needs_confirmation(verdict: dict[str, Any]) -> bool:
 
 def confirmation(selection: list[Record], fresh: list[Record], verdict: dict[str, Any],
                  chosen: list[int]) -> dict[str, Any]:
-    """The winner against the incumbent on the fresh seeds: their grid (the tuning shapes the model ran x
-    fresh_seeds x both levels: runs) and how many of them have no ok record yet (missing: pending while > 0);
+    """The winner against the incumbent on the fresh seeds. Their grid (the tuning shapes the model ran x
+    fresh_seeds x both levels: runs) and how many of its runs have no record yet (missing: pending while > 0); the
     by-shape and by-run CD-L2 ratio winner / incumbent over the runs that gave a result; the shapes where a winner's
-    run gave none; confirmed: nothing missing, a result in every winner's run, every shape compared and the by-shape
-    interval below 1."""
+    run gave none or failed (no_result_on) and those where every incumbent's run did (lost_by_incumbent: they count
+    for the winner, as a tuning shape the incumbent did not converge on does in the selection). Confirmed: nothing
+    missing, no winner's miss, every other shape compared and the by-shape interval below 1."""
     model, win = verdict["model"], verdict["winner"]
     shapes = list(dict.fromkeys(shape_name(r) for r in selection if r.get("model") == model))
     seeds = fresh_seeds(chosen)
     mine = [r for r in fresh if r.get("model") == model and seed(r) in seeds
             and candidate(r)[1] in (INCUMBENT, win) and shape_name(r) in shapes]
-    done = {(candidate(r)[1], shape_name(r), seed(r)) for r in ok_records(mine)}
-    missing = 2 * len(shapes) * len(seeds) - len(done)
+    missing = 2 * len(shapes) * len(seeds) - len({(candidate(r)[1], shape_name(r), seed(r)) for r in mine})
     read = by_name()[CHAMFER].read
 
     def per_shape(level: str) -> dict[str, float]:
         return shape_means((shape_name(r), read(r)) for r in ok_records(mine)
                            if candidate(r)[1] == level and not no_result(r))
 
-    misses = sorted(c["shape"] for c in cells_without_result([r for r in mine if candidate(r)[1] == win]))
+    def cells(level: str) -> list[dict[str, Any]]:
+        return cells_without_result([r for r in mine if candidate(r)[1] == level])
+
+    misses = sorted(c["shape"] for c in cells(win))
+    lost = sorted(c["shape"] for c in cells(INCUMBENT) if c["failed"] == c["seeds"])
     by_shape = ratio(per_shape(win), per_shape(INCUMBENT))
     separable = math.isfinite(by_shape.hi) and by_shape.hi < 1
     return {"seeds": seeds, "shapes": shapes, "runs": 2 * len(shapes) * len(seeds), "missing": missing,
-            "records": mine, "by_shape": by_shape, "no_result_on": misses,
+            "records": mine, "by_shape": by_shape, "no_result_on": misses, "lost_by_incumbent": lost,
             "by_run": _by_run([r for r in mine if not no_result(r)], model, win, INCUMBENT),
-            "confirmed": not missing and not misses and by_shape.n == len(shapes) and separable}
+            "confirmed": (not missing and not misses and by_shape.n + len(lost) == len(shapes)
+                          and (separable or by_shape.n == 0 < len(lost)))}
 
 
 def _confirmation_sweep(verdict: dict[str, Any], check: dict[str, Any]) -> list[str]:
@@ -169,22 +174,24 @@ def _confirmation_sweep(verdict: dict[str, Any], check: dict[str, Any]) -> list[
             f"shape={','.join(check['shapes'])}", f"seed={','.join(map(str, check['seeds']))}"]
 
 
-def confirmations(records: list[Record]) -> list[dict[str, Any]]:
-    """The verdicts on the selection seeds, each that proposes a change of preset with its confirmation (key
-    "confirm")."""
+def protocol(records: list[Record]) -> dict[str, Any]:
+    """The protocol on all its records: the selection seeds (chosen), the records of those (selection) and of other
+    seeds (fresh), the candidates' rows on the selection, and the verdicts, each that proposes a change of preset
+    with its confirmation (key "confirm")."""
     chosen, selection, fresh = split_by_seed(records)
-    out = verdicts(selection, candidate_rows(selection))
-    for v in out:
+    rows = candidate_rows(selection)
+    found = verdicts(selection, rows)
+    for v in found:
         if needs_confirmation(v):
             v["confirm"] = confirmation(selection, fresh, v, chosen)
-    return out
+    return {"chosen": chosen, "selection": selection, "fresh": fresh, "rows": rows, "verdicts": found}
 
 
 def confirmation_sweeps(records: list[Record]) -> list[list[str]]:
     """The overrides of each sweep the protocol still needs: one per model whose confirmation has runs without an ok
     record (python -m ddfbench OVERRIDES ... into the same results folder, which skips the runs done; then the
     report again)."""
-    return [_confirmation_sweep(v, v["confirm"]) for v in confirmations(records)
+    return [_confirmation_sweep(v, v["confirm"]) for v in protocol(records)["verdicts"]
             if "confirm" in v and v["confirm"]["missing"]]
 
 
@@ -208,8 +215,8 @@ def preset_to_use(verdict: dict[str, Any]) -> str:
 def sections(records: list[Record]) -> list[str]:
     """The markdown of the candidates' table, the verdicts and the confirmations (records of seeds outside
     selection_seeds are the confirmation's)."""
-    chosen, selection, _ = split_by_seed(records)
-    rows = candidate_rows(selection)
+    run = protocol(records)
+    chosen, selection, rows = run["chosen"], run["selection"], run["rows"]
     lines = ["## Candidates on the tuning shapes", "",
              *([f"No record of the selection seeds {', '.join(map(str, chosen))} (conf/experiment/{EXPERIMENT}.yaml): "
                 "no candidate is scored.", ""] if not selection else []),
@@ -235,15 +242,14 @@ def sections(records: list[Record]) -> list[str]:
               "",
               "| model | winner | runner-up | by shape [95 %] | by run [95 %] | separable | preset to use |",
               "|---|---|---|---|---|---|---|"]
-    verdict_list = confirmations(records)
-    for v in verdict_list:
+    for v in run["verdicts"]:
         if v["runner_up"] is None:
             winner = v["winner"] or "no candidate had a result in every run"
             lines.append(f"| {v['model']} | {winner} | – | – | – | – | {preset_to_use(v)} |")
             continue
         lines.append(f"| {v['model']} | {v['winner']} | {v['runner_up']} | {fmt(v['by_shape'])} | "
                      f"{fmt(v['by_run'])} | {'yes' if v['separable'] else 'no'} | {preset_to_use(v)} |")
-    checks = [v for v in verdict_list if "confirm" in v]
+    checks = [v for v in run["verdicts"] if "confirm" in v]
     if checks:
         lines += ["", "## Confirmation on fresh seeds", "",
                   "Each separable winner that would replace the incumbent, against the incumbent on the tuning shapes "
@@ -271,19 +277,21 @@ def sections(records: list[Record]) -> list[str]:
         for v in checks:
             for level in (INCUMBENT, v["winner"]):
                 for shape in v["confirm"]["shapes"]:
-                    runs = sorted((r for r in ok_records(v["confirm"]["records"])
+                    runs = sorted((r for r in v["confirm"]["records"]
                                    if candidate(r)[1] == level and shape_name(r) == shape), key=seed)
                     if not runs:
                         continue
-                    kept = shape_means((shape, read(r)) for r in runs if not no_result(r)).get(shape, math.nan)
+                    kept = shape_means((shape, read(r)) for r in ok_records(runs) if not no_result(r)).get(shape)
                     lines.append(f"| {v['model']} | {level} | {shape} | {', '.join(str(seed(r)) for r in runs)} | "
-                                 f"{kept * 1e3:.3g} | {sum(no_result(r) for r in runs)} | "
+                                 f"{'–' if kept is None else f'{kept * 1e3:.3g}'} | "
+                                 f"{sum(r.get('status') != 'ok' or no_result(r) for r in runs)} | "
                                  f"{' '.join(str(r.get('key')) for r in runs)} |")
     used = {id(r) for v in checks for r in v["confirm"]["records"]}
-    other = [r for r in split_by_seed(records)[2] if id(r) not in used]
+    other = [r for r in run["fresh"] if id(r) not in used]
     if other:
-        lines += ["", f"{len(other)} runs of seeds outside the selection belong to no confirmation (models: "
-                      f"{', '.join(sorted({str(r.get('model')) for r in other}))}; seeds "
-                      f"{', '.join(map(str, sorted({seed(r) for r in other}, key=str)))}): in runs.csv and the "
-                      "records, in no table here."]
+        seeds = sorted({seed(r) for r in other}, key=lambda x: (not isinstance(x, int), x if isinstance(x, int) else 0,
+                                                              str(x)))  # 3 before 10
+        models = ", ".join(sorted({str(r.get("model")) for r in other}))
+        lines += ["", f"{len(other)} runs of seeds outside the selection belong to no confirmation (models: {models}; "
+                      f"seeds {', '.join(map(str, seeds))}): in runs.csv and the records, in no table here."]
     return ["\n".join(lines) + "\n"]

@@ -123,17 +123,28 @@ def expected_grid(records_dir: str, overrides: list[str]) -> tuple[list[Job], st
     return jobs, source
 
 
+def compose_plain(loader: Any, master: DictConfig, overrides: list[str]) -> tuple[dict[str, Any], dict[str, str]]:
+    """One job of a sweep as the job itself resolves it, before its levels: (its resolved config without the hydra
+    node, Hydra's config-group choices). HydraConfig is left as it was found (the sweep's own, in a callback)."""
+    from hydra.core.hydra_config import HydraConfig
+
+    before = HydraConfig.instance().cfg
+    cfg = loader.load_sweep_config(master, overrides)
+    try:
+        HydraConfig.instance().set_config(cfg)  # as the job itself resolves its interpolations
+        choices = dict(cfg.hydra.runtime.choices)
+        with open_dict(cfg):
+            del cfg["hydra"]
+        return OmegaConf.to_container(cfg, resolve=True), choices  # type: ignore[return-value]
+    finally:
+        HydraConfig.instance().cfg = before
+
+
 def compose_job(loader: Any, master: DictConfig, overrides: list[str]) -> tuple[dict[str, Any], dict[str, str]]:
     """One job of a sweep as the job itself sees it: (its resolved config with its levels applied,
     plugins.job_config, what its record key is taken from; Hydra's config-group choices)."""
-    from hydra.core.hydra_config import HydraConfig
-
-    cfg = loader.load_sweep_config(master, overrides)
-    HydraConfig.instance().set_config(cfg)  # as the job itself resolves its interpolations
-    choices = dict(cfg.hydra.runtime.choices)
-    with open_dict(cfg):
-        del cfg["hydra"]
-    return plugins.job_config(OmegaConf.to_container(cfg, resolve=True), choices), choices  # type: ignore[arg-type]
+    cfg, choices = compose_plain(loader, master, overrides)
+    return plugins.job_config(cfg, choices), choices
 
 
 def sweep_status(records_dir: str, overrides: list[str] | None = None) -> SweepStatus:

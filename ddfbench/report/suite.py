@@ -280,17 +280,19 @@ def run(suite: str, tier: str, results: str, extra: list[str] | None = None, fro
                *entry.overrides, *(extra or [])]
         print("$", " ".join(cmd[1:]), flush=True)
         swept = subprocess.run(cmd).returncode
-        rc = max(rc, swept)
+        rc = max(rc, swept if swept >= 0 else 1)  # a sweep killed by a signal has a negative code
         records_dir = os.path.join(results, str(OmegaConf.load(os.path.join(
             CONF_DIR, "experiment", f"{entry.experiment}.yaml")).get("experiment_name") or entry.experiment))
         report = [sys.executable, "-m", "ddfbench.report", records_dir, "--out", os.path.join(ROOT, entry.report)]
         rc = max(rc, subprocess.run(report).returncode)
         follow_up = FOLLOW_UPS.get(entry.experiment)
-        if follow_up and swept:  # from a selection with failed or missing runs: run the experiment again first
-            print(f"{entry.experiment}: its sweep exited {swept}; the sweeps its report asks for are not run",
-                  flush=True)
-        sweeps = follow_up(compact.load_records(records_dir)) if follow_up and not swept and \
-            os.path.isdir(records_dir) else []
+        sweeps = []
+        if follow_up and os.path.isdir(records_dir):
+            if sweep_ran_through(records_dir, swept):
+                sweeps = follow_up(compact.load_records(records_dir))
+            else:  # cut short: the follow-ups would start from part of its runs
+                print(f"{entry.experiment}: its sweep has runs without a record; the sweeps its report asks for are "
+                      "not run (run the tier again)", flush=True)
         for overrides in sweeps:  # complete sweeps of their own: the entry's overrides are not added
             cmd = [sys.executable, "-m", "ddfbench", *overrides, f"out_dir={results}", "quiet=true", *(extra or [])]
             print("$", " ".join(cmd[1:]), flush=True)
@@ -298,6 +300,18 @@ def run(suite: str, tier: str, results: str, extra: list[str] | None = None, fro
         if sweeps:
             rc = max(rc, subprocess.run(report).returncode)
     return rc
+
+
+def sweep_ran_through(records_dir: str, exit_code: int) -> bool:
+    """Whether every job of the newest sweep below records_dir has a record, ok or failed (a failure that repeats
+    on every rerun, such as a divergence, must not hold a follow-up back); by the sweep's exit code where its grid
+    cannot be read."""
+    from ddfbench.report.status import sweep_status
+
+    try:
+        return not sweep_status(records_dir).missing
+    except (InputError, OSError):
+        return exit_code == 0
 
 
 def stale(entry: Entry, records: list[dict[str, Any]]) -> tuple[str, list[str]]:
