@@ -209,7 +209,7 @@ def test_killed_sweep_resumes_without_loss_or_duplicates(tmp_path):
     assert {j.key for j in st.done} == set(before) and not st.failed
     assert [j.key for j in sweep_status(records_dir, SMOKE).expected] == [j.key for j in st.expected]  # from overrides
     assert len(st.missing) == N_RUNS - len(before)
-    assert not suite.sweep_ran_through(records_dir, -9)  # cut short: no follow-up sweep starts from it
+    assert not suite.sweep_ran_through(records_dir, -9, 0.0)  # cut short: no follow-up sweep starts from it
 
     launch(tmp_path)  # the same sweep again (serial this time: keys do not depend on the launcher)
     after = by_key(tmp_path)
@@ -241,7 +241,9 @@ def test_failed_runs_rerun_and_status_reports_them(tmp_path, capsys):
         assert str(mesh) in error and "\n" not in error
         assert f"[{job.key}]  {error}" in text
     assert "done 0  failed 2  missing 0" in text
-    assert suite.sweep_ran_through(records_dir, 1)  # every job has a record, failed ones too: follow-ups may run
+    assert suite.sweep_ran_through(records_dir, 1, 0.0)  # every job has a record, failed ones too: follow-ups may run
+    # a later sweep that stopped before its first job wrote no grid of its own: its exit code decides, not this one
+    assert not suite.sweep_ran_through(records_dir, 1, time.time() + 1)
 
     trimesh.creation.box().export(mesh)  # the cause is fixed: the same sweep runs them again, keyed on the
     launch(tmp_path, *args)                # file's contents (a new input is a new run; the failed ones stay as theirs)

@@ -138,7 +138,7 @@ def test_run_runs_the_sweeps_a_report_asks_for_then_writes_the_report_again(monk
     monkeypatch.setattr(suite.subprocess, "run", lambda cmd, **_: commands.append(cmd) or Done())
     monkeypatch.setitem(suite.FOLLOW_UPS, "tune_finalists", confirmation)
     ran_through = {"value": True}  # every job of the sweep has a record (status.sweep_status: nothing missing)
-    monkeypatch.setattr(suite, "sweep_ran_through", lambda folder, code: ran_through["value"])
+    monkeypatch.setattr(suite, "sweep_ran_through", lambda folder, code, since: ran_through["value"])
     run = ["run", "v1", "--tier", "long", "--only", "tune_finalists", "--results", str(tmp_path), "--", "threads=1"]
     assert suite.main(run) == 0 and commands[1][2] == "ddfbench.report" and len(commands) == 2  # no records: none
     commands.clear()

@@ -164,8 +164,8 @@ def separable_b(fresh_seeds=(), b_factor=0.8, b_empty_on=None, a_empty_in=None, 
                 continue
             factor = 0.8 if seed < 3 else b_factor
             spread = 1 + 0.1 * (seed % 3) + 0.02 * shape_i  # b's spread differs from a's: the ratios vary a little
-            out.append(rec("m", shape, seed, 1.0 if seed == a_empty_in else 1e-3 * (1 + shape_i) * (1 + 0.1 * (seed % 3)),
-                           level="a", empty=seed == a_empty_in))  # an empty run's chamfer is the penalty
+            a_value = 1.0 if seed == a_empty_in else 1e-3 * (1 + shape_i) * (1 + 0.1 * (seed % 3))  # empty: the penalty
+            out.append(rec("m", shape, seed, a_value, level="a", empty=seed == a_empty_in))
             out.append(rec("m", shape, seed, factor * 1e-3 * (1 + shape_i) * spread, level="b",
                            empty=shape == b_empty_on and seed == fresh_seeds[0]))
             if seed < 3:
@@ -224,6 +224,15 @@ def test_a_confirmation_cut_short_stays_pending_and_an_incumbent_s_miss_is_no_wi
             if r["config"]["capacity"] == "a" and r["shape"]["name"] == "gear" and r["config"]["seed"] > 2 else r
             for r in separable_b(fresh_seeds=(3, 4, 5))]
     assert "| yes | b (confirmed) |" in finalists.sections(lost)[0]
+    tied_but_lost = [{**r, "metrics": {**r["metrics"], "chamfer_l2": 1.0, "empty_reconstruction": True}}
+                     if r["config"]["capacity"] == "a" and r["shape"]["name"] == "gear" and r["config"]["seed"] > 2
+                     else r for r in separable_b(fresh_seeds=(3, 4, 5), b_factor=1.0)]
+    assert "| yes | b (confirmed) |" in finalists.sections(tied_but_lost)[0]  # tied elsewhere: the lost shape decides
+    # a stale failed record of a run beside its ok one (a key that changed between launches): the ok one counts
+    stale = separable_b(fresh_seeds=(3, 4, 5))
+    stale += [{**r, "key": "old", "status": "failed", "finished": "0"} for r in stale
+              if (r["config"]["capacity"], r["shape"]["name"], r["config"]["seed"]) == ("b", "gear", 3)]
+    assert "| yes | b (confirmed) |" in finalists.sections(stale)[0]
     # a chamfer missing from the preset's gear runs (not a miss): the gear is not compared, so not confirmed
     unread = [{**r, "metrics": {k: v for k, v in r["metrics"].items() if k != "chamfer_l2"}}
               if r["config"]["capacity"] == "a" and r["shape"]["name"] == "gear" and r["config"]["seed"] > 2 else r
@@ -232,7 +241,7 @@ def test_a_confirmation_cut_short_stays_pending_and_an_incumbent_s_miss_is_no_wi
     # seeds stored as strings are the same seeds
     as_text = [{**r, "config": {**r["config"], "seed": str(r["config"]["seed"])}} for r in separable_b()]
     assert finalists.confirmation_sweeps(as_text) == [SWEEP]
-    other = separable_b(fresh_seeds=(3, 4, 5)) + [rec("g", "cow", 7, 1e-3, level="a"), rec("g", "cow", 8, 1e-3, level="b")]
+    other = separable_b(fresh_seeds=(3, 4, 5)) + [rec("g", "cow", s, 1e-3, level=lv) for s, lv in ((7, "a"), (8, "b"))]
     assert "2 runs of seeds outside the selection belong to no confirmation (models: g; seeds 7, 8)" in \
         finalists.sections(other)[0]
     fresh_only = [r for r in separable_b(fresh_seeds=(3, 4, 5)) if r["config"]["seed"] > 2]

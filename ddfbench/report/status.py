@@ -58,7 +58,7 @@ def _without_launcher(overrides: list[str]) -> list[str]:
     return [o for o in overrides if not o.lstrip("+~").startswith(LAUNCHER_PREFIXES)]
 
 
-def _newest_sweep(records_dir: str) -> str | None:
+def newest_sweep(records_dir: str) -> str | None:
     """The newest multirun.yaml beside records_dir whose experiment_name is the folder's name."""
     name = os.path.basename(os.path.normpath(records_dir))
     pattern = os.path.join(os.path.dirname(os.path.abspath(records_dir)), ".hydra", "sweep", "*", "multirun.yaml")
@@ -77,7 +77,7 @@ def _master_config(loader: Any, records_dir: str, overrides: list[str]) -> tuple
     elif overrides:
         sweep_file = None
     else:
-        sweep_file = _newest_sweep(records_dir)
+        sweep_file = newest_sweep(records_dir)
     if sweep_file is not None:
         master = OmegaConf.load(sweep_file)
         with open_dict(master):

@@ -21,6 +21,7 @@ import os
 import statistics
 import subprocess
 import sys
+import time
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -279,6 +280,7 @@ def run(suite: str, tier: str, results: str, extra: list[str] | None = None, fro
         cmd = [sys.executable, "-m", "ddfbench", f"+experiment={entry.experiment}", f"out_dir={results}", "quiet=true",
                *entry.overrides, *(extra or [])]
         print("$", " ".join(cmd[1:]), flush=True)
+        started = time.time()
         swept = subprocess.run(cmd).returncode
         rc = max(rc, swept if swept >= 0 else 1)  # a sweep killed by a signal has a negative code
         records_dir = os.path.join(results, str(OmegaConf.load(os.path.join(
@@ -288,7 +290,7 @@ def run(suite: str, tier: str, results: str, extra: list[str] | None = None, fro
         follow_up = FOLLOW_UPS.get(entry.experiment)
         sweeps = []
         if follow_up and os.path.isdir(records_dir):
-            if sweep_ran_through(records_dir, swept):
+            if sweep_ran_through(records_dir, swept, started):
                 sweeps = follow_up(compact.load_records(records_dir))
             else:  # cut short: the follow-ups would start from part of its runs
                 print(f"{entry.experiment}: its sweep has runs without a record; the sweeps its report asks for are "
@@ -302,14 +304,18 @@ def run(suite: str, tier: str, results: str, extra: list[str] | None = None, fro
     return rc
 
 
-def sweep_ran_through(records_dir: str, exit_code: int) -> bool:
-    """Whether every job of the newest sweep below records_dir has a record, ok or failed (a failure that repeats
-    on every rerun, such as a divergence, must not hold a follow-up back); by the sweep's exit code where its grid
-    cannot be read."""
-    from ddfbench.report.status import sweep_status
+def sweep_ran_through(records_dir: str, exit_code: int, since: float) -> bool:
+    """Whether every job of the sweep started at `since` (epoch seconds) into records_dir has a record, ok or failed
+    (a failure that repeats on every rerun, such as a divergence, must not hold a follow-up back). A sweep that wrote
+    no grid of its own (multirun.yaml) since then stopped before its first job; there, and where its grid cannot be
+    read, its exit code decides."""
+    from ddfbench.report.status import newest_sweep, sweep_status
 
+    grid = newest_sweep(records_dir)
+    if grid is None or os.path.getmtime(grid) < since:
+        return exit_code == 0
     try:
-        return not sweep_status(records_dir).missing
+        return not sweep_status(records_dir, [grid]).missing
     except (InputError, OSError):
         return exit_code == 0
 
