@@ -163,6 +163,19 @@ def _at(cfg: Any, path: str) -> tuple[bool, Any]:
     return True, cfg
 
 
+# the overrides that decide what a job's levels set: a plugin group's choice and the key that picks its level
+LEVEL_CHOICES = (*plugins.LEVEL_KEYS, *plugins.LEVEL_KEYS.values())
+
+
+def _set_key(override: str, choices: dict[str, str]) -> str | None:
+    """The config key a command-line `key=value` sets, or None for what a level cannot replace: a config group's
+    choice, a level's own key, a Hydra setting, a deletion."""
+    key, eq, _ = override.lstrip("+").partition("=")
+    if not eq or override.startswith("~") or key in choices or key in LEVEL_CHOICES or key.startswith("hydra"):
+        return None
+    return key
+
+
 def check_levels_keep(cfg: dict[str, Any], choices: dict[str, str], overrides: list[str]) -> None:
     """A one-line InputError when a `key=value` of the command line is replaced by the level the job applies
     (plugins.job_config: e.g. ddf_tuned's `first_look` sets train.max_steps for the default run), which would run
@@ -176,9 +189,10 @@ def check_levels_keep(cfg: dict[str, Any], choices: dict[str, str], overrides: l
     except InputError:
         return
     for arg in overrides:
-        path, _, given = arg.lstrip("+").partition("=")
-        if not _ or path in choices or path.startswith("hydra.") or path in plugins.LEVEL_KEYS.values():
+        path = _set_key(arg, choices)
+        if path is None:
             continue
+        given = arg.partition("=")[2]
         (found, asked), (_, ran) = _at(cfg, path), _at(leveled, path)
         if found and asked != ran:
             keys = [k for k in plugins.LEVEL_KEYS.values() if cfg.get(k) is not None]
@@ -209,9 +223,6 @@ def check_plain_keys(args: list[str]) -> None:
             plugins.strict_keys(section, {key.split(".")[0]: value}, dict.fromkeys(known[section]), near=True)
 
 
-LEVEL_CHOICES = ("model", "capacity", "sampling", "sample_size")  # the overrides that decide what a job's levels set
-
-
 def check_sweep_levels(config: DictConfig) -> None:
     """check_levels_keep for every job of a basic sweep, before the first one runs: one job composed per distinct
     model, sampler, level and swept plain value. Only when the command line sets a plain key (the sweep's own
@@ -222,8 +233,7 @@ def check_sweep_levels(config: DictConfig) -> None:
 
     task = list(config.hydra.overrides.task)
     choices = dict(config.hydra.runtime.choices)
-    plain = {key for o in task if (key := o.lstrip("+").split("=", 1)[0]) not in choices
-             and key not in LEVEL_CHOICES and not key.startswith("hydra") and not o.startswith("~")}
+    plain = {key for o in task if (key := _set_key(o, choices)) is not None}
     if not plain or not str(config.hydra.sweeper.get("_target_", "")).endswith("BasicSweeper"):
         return
     loader = GlobalHydra.instance().config_loader()
