@@ -7,6 +7,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from ddfbench.report import across_shapes as ax
+from ddfbench.report.stats import holm
 
 
 def test_shape_means_average_the_seeds_of_each_shape_and_drop_non_finite_values():
@@ -47,10 +48,10 @@ def test_a_bounded_metric_gets_the_logit_t_interval():
 
 
 def test_holm_steps_down_and_keeps_the_order():
-    assert ax.holm([0.01, 0.04, 0.03]) == pytest.approx([0.03, 0.06, 0.06])
+    assert holm([0.01, 0.04, 0.03]) == pytest.approx([0.03, 0.06, 0.06])
     # a p of 0.039, one of three comparisons, is not below 0.05 once corrected
-    assert ax.holm([0.039, 0.2, 0.5])[0] == pytest.approx(0.117)
-    assert math.isnan(ax.holm([math.nan, 0.02])[0]) and ax.holm([math.nan, 0.02])[1] == 0.02
+    assert holm([0.039, 0.2, 0.5])[0] == pytest.approx(0.117)
+    assert math.isnan(holm([math.nan, 0.02])[0]) and holm([math.nan, 0.02])[1] == 0.02
 
 
 @settings(max_examples=60, deadline=None, derandomize=True)

@@ -381,6 +381,31 @@ def test_the_thesis_summary_rows_read_storage_and_the_40_epoch_gan():
     assert row.measured.endswith("; 2000 points")  # the records' evaluation point count
 
 
+def test_a_grid_sdf_run_in_two_experiments_counts_once():
+    """The shape suite's bunny runs of the grid SDF are the representations runs of the same keys: pooled, each is
+    one run (n 3, not 6)."""
+    grid = [rec("representations", "grid_sdf", s, jitter(s, 1.5e-5), family="grid_sdf") for s in SEEDS]
+    again = [{**r, "experiment": "shape_suite"} for r in grid]
+    gan = [rec("gan_epochs", "gan_sdf", s, jitter(s, 1.45e-4), family="gan_sdf") for s in SEEDS]
+    (row,) = [c for c in claims.evaluate(records(gan_epochs=gan, representations=grid, shape_suite=again))
+              if c.claim == "G's error small against the grid SDF's"]
+    assert "(n=3): ratio" in row.measured and "(n=6)" not in row.measured
+
+
+def test_a_paper_network_row_says_how_many_of_its_runs_gave_no_result():
+    runs = [rec("paper_ddf", "ddf_paper_lr", s, jitter(s, 0.3e-3), family="ddf") for s in SEEDS]
+    runs[1] = {**runs[1], "metrics": {"chamfer_l2": 0.0864, "fscore": {"0.02": 0.0}, "n_points": 2000}}  # off the shape
+    (row,) = [c for c in claims.evaluate(records(paper_ddf=runs))
+              if c.claim == "ddf_paper_lr: bunny chamfer at most the paper's 0.589×10³"]
+    assert "with 1 of 3 runs empty or off the shape (their chamfer in the mean)" in row.measured
+    assert row.verdict == claims.NOT_TESTABLE
+
+
+def test_holm_notes_count_the_comparisons_that_have_a_p():
+    assert claims._holm_note([0.02, float("nan"), 0.04]) == ["; p 0.02, Holm 0.04 (2 comparisons)", "; p –",
+                                                            "; p 0.04, Holm 0.04 (2 comparisons)"]
+
+
 def grid_encodings(grid_gap, mlp_gap=10.0):
     """The DDF at grid_gap x the grid SDF's chamfer and mlp_gap x the MLP SDF's, on three shapes (a spread by shape)."""
     out = []

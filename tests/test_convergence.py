@@ -38,6 +38,17 @@ def test_time_to_floor_median_over_seeds_and_not_reached():
     assert "| ddf | bunny | 3 | 0.01 | 10 (3/3) | 100 (3/3) |" in md and "not reached (1/3)" in md
 
 
+def test_time_to_floor_with_half_the_seeds_there_is_the_slower_of_those_that_did():
+    """Four seeds, two reach 5 x the floor (at 10 s and 30 s): half got there, so the row gives a time (the lower
+    median, 30 s), not 'not reached'; one of four is not enough."""
+    recs = [run("ddf", "bunny", s, [(1, 1e-3), (10, 4e-5 if s == 0 else 1e-3), (30, 4e-5 if s < 2 else 1e-3)])
+            for s in range(4)]
+    (row,) = convergence.time_to_floor_rows(recs)
+    assert row["reached_5x"] == 2 and row["median_s_5x"] == 30
+    (row,) = convergence.time_to_floor_rows(recs[1:] + [run("ddf", "bunny", 9, [(1, 1e-3), (30, 1e-3)])])
+    assert row["reached_5x"] == 1 and math.isinf(row["median_s_5x"])
+
+
 def test_floor_is_over_the_ok_records_of_one_shape_or_of_every_shape():
     recs = [run("ddf", "bunny", 0, [(1, 1e-3)], floor=1e-5), run("ddf", "bone", 0, [(1, 1e-3)], floor=3e-5)]
     recs.append({**run("ddf", "bunny", 1, [(1, 1e-3)], floor=1.0), "status": "failed"})

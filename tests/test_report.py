@@ -187,7 +187,8 @@ def test_a_new_metric_declaration_reaches_the_table_with_its_empty_penalty(monke
     df = tables.summarize(recs)
     assert sorted(df["hausdorff_mean"]) == pytest.approx([0.002, 3.752])  # the empty run counts its penalty
     md = tables.to_markdown(df)
-    assert "Hausdorff ×10³" in md and "| 3752 ± 5.3e+03 ≈ |" in md and "| 2 ≈ |" in md  # n = 1: tied
+    # the row with an empty run is not ranked, which leaves one ranked row: nothing is marked
+    assert "Hausdorff ×10³" in md and "| 3752 ± 5.3e+03 |" in md and "| 2 |" in md
 
 
 def test_noise_floor_is_its_own_row_per_shape():
@@ -359,6 +360,33 @@ def test_a_fit_that_never_found_the_shape_is_counted_and_a_row_of_them_is_not_co
     assert points == {"gan_sdf": False, "gan_lost": True, "gan_both": True}
 
 
+def test_a_row_with_an_empty_run_is_not_ranked_nor_tied_with_the_best():
+    """1 empty run of 3 puts the penalty (8.64) in the row's mean and widens its interval past every other: ranked,
+    it would tie with the best and take its bold away."""
+    best = seeded("bunny", 64, 1.0e-3, 0.01)
+    second = seeded("bunny", 128, 2.0e-3, 0.01)
+    holed = [make_record(width=256, seed=s, chamfer=c) for s, c in ((0, 1.0e-3), (1, 1.0e-3), (2, 8.64))]
+    holed[2]["metrics"]["empty_reconstruction"] = True
+    df = tables.summarize(best + second + holed)
+    assert df.loc[2, "chamfer_l2_ci_lo"] <= df.loc[0, "chamfer_l2_ci_hi"]  # its interval does overlap the best's
+    assert list(tables.marks(df, "chamfer_l2")) == ["best", "", ""]
+    md = tables.to_markdown(df)
+    assert "**1 ±" in md and "the row is not ranked" in md
+
+
+def test_the_table_names_its_evaluation_point_count():
+    recs = seeded("bunny", 64, 1e-3) + seeded("bunny", 128, 2e-3)
+    for r in recs:
+        r["config"]["eval"] = {"n_points": 100000 if r["config"]["model"]["width"] == 64 else 20000}
+    df = tables.summarize(recs)
+    assert sorted(df["eval_points"]) == [20000, 100000]
+    md = tables.to_markdown(df)
+    assert "on 20,000 or 100,000 points a surface (by row: table.csv's eval_points)" in md
+    assert "eval_points" not in md.splitlines()[0]  # not a label column
+    assert "on 100,000 points a surface." in tables.to_markdown(tables.summarize(recs[:3]))
+    assert "the evaluation point count is not recorded" in tables.to_markdown(tables.summarize(seeded("bunny", 64, 1e-3)))
+
+
 def test_a_value_defined_in_fewer_runs_than_n_says_over_how_many():
     recs = [make_record(seed=s, chamfer=1e-3 * (1 + s)) for s in range(3)]
     for r, mae in zip(recs, (2e-3, 4e-3, None)):  # the third render hit no pixel the reference hit
@@ -399,6 +427,26 @@ def test_paired_differences_of_the_ablation_against_its_base():
     md = paired.paired_report("ablation", recs)
     assert "| s_fc=10 s_dr=10 s_p=30 | 3 |" in md and "| yes |" in md
     assert paired.paired_report("storage", recs) is None
+
+
+def test_paired_settings_are_separated_by_their_holm_adjusted_p():
+    """Six settings, each with a ratio of about 0.9 on three seeds (raw p near 0.01-0.02): every raw interval excludes
+    1, but Holm across the six leaves none separated; one far lower ratio stays separated."""
+    from ddfbench.report import paired
+
+    base = {"strategy": "surface", "s_fc": 10, "s_dr": 10, "s_p": 10}
+    noise = (1.0, 1.02, 0.98)
+    recs = [make_record(seed=s, sampling=base, chamfer=1e-3 * noise[s]) for s in (0, 1, 2)]
+    levels = [base | {k: v} for k in ("s_fc", "s_dr", "s_p") for v in (20, 30)]
+    for i, lv in enumerate(levels):
+        ratio = 0.05 if i == 0 else 0.9
+        recs += [make_record(seed=s, sampling=lv, chamfer=1e-3 * noise[s] * ratio * (1, 1.03, 0.995)[s]) for s in (0, 1, 2)]
+    rows = paired.compare_settings(recs, "chamfer_l2", paired.surface_levels, "s_fc=10 s_dr=10 s_p=10")
+    raw = [stats.t_test_p(r["ratio"]) for r in rows]
+    assert all(p < 0.05 for p in raw) and all(np.exp(r["ratio"].hi) < 1 for r in rows)
+    md = paired.to_markdown(rows, "chamfer_l2", "s_fc=10 s_dr=10 s_p=10", "same shape and seed")
+    seps = [line.rstrip(" |").rsplit("| ", 1)[1] for line in md.splitlines() if line.startswith("| s_")]
+    assert seps == ["yes"] + ["no"] * 5 and "Holm-adjusted across the table's 6 settings" in md
 
 
 def test_a_report_commit_between_runs_is_not_a_code_change(tmp_path):

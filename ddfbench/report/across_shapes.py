@@ -13,7 +13,7 @@ gets n = the number of shapes. Every interval here stays inside its metric's ran
                                                      two-sided p (H0: ratio 1) for Holm's correction (the same
                                                      ratio on every shape: a zero-width interval, p 0)
 
-`holm` adjusts the p values of one family of claims (Holm 1979: step-down, controls the family-wise error).
+Holm's correction of a family of such p values: report.stats.holm.
 """
 
 from __future__ import annotations
@@ -93,14 +93,3 @@ def fmt(s: OverShapes, scale: float = 1.0) -> str:
         return "–"
     bounds = f" [{s.lo * scale:.3g}, {s.hi * scale:.3g}]" if math.isfinite(s.lo) else ""
     return f"{s.center * scale:.3g}{bounds} (n {s.n})"
-
-
-def holm(pvalues: Iterable[float]) -> list[float]:
-    """Holm-adjusted p values in the input order (NaN stays NaN and is not counted in the family)."""
-    p = list(pvalues)
-    order = sorted((i for i, x in enumerate(p) if math.isfinite(x)), key=lambda i: p[i])
-    m, out, running = len(order), [math.nan] * len(p), 0.0
-    for rank, i in enumerate(order):
-        running = max(running, min(1.0, (m - rank) * p[i]))
-        out[i] = running
-    return out

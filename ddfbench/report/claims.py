@@ -34,12 +34,11 @@ from dataclasses import dataclass, replace
 from typing import Any, Callable
 
 import numpy as np
-from scipy import stats as _scipy_stats
 
 from ddfbench.core.errors import InputError
 from ddfbench.evaluate.metric_registry import by_name
 from ddfbench.report import across_shapes, compact, convergence, matched, paired, shape_suite
-from ddfbench.report.across_shapes import holm, shape_means
+from ddfbench.report.across_shapes import shape_means
 from ddfbench.report.records import (
     SURFACE_FACTORS,
     as_float,
@@ -50,7 +49,7 @@ from ddfbench.report.records import (
     ok_records,
     shape_name,
 )
-from ddfbench.report.stats import Summary, sig3, summarize_values, welch_ratio, within_range
+from ddfbench.report.stats import Summary, holm, sig3, summarize_values, t_test_p, welch_ratio, within_range
 from ddfbench.run.runs import code_commits, find_records
 
 CONFIRMED, REFUTED, NOT_SEPARABLE, NOT_TESTABLE, NO_RECORDS, NOT_CONVERGED = (
@@ -121,19 +120,10 @@ def below(s: Summary, bound: float, p_holm: float | None = None) -> str:
     return CONFIRMED if s.hi < bound else REFUTED if s.lo > bound else NOT_SEPARABLE
 
 
-def t_test_p(s: Summary, against: float = 0.0) -> float:
-    """Two-sided p of the one-sample t test of the mean against `against` (NaN below n = 2; with no spread 0, or 1
-    when the mean is `against` itself)."""
-    if s.n < 2:
-        return math.nan
-    if not s.std > 0:
-        return 0.0 if s.mean != against else 1.0
-    t = (s.mean - against) / (s.std / math.sqrt(s.n))
-    return float(2 * _scipy_stats.t.sf(abs(t), s.n - 1))
-
-
 def _holm_note(pvalues: list[float]) -> list[str]:
-    return [f"; p {p:.2g}, Holm {h:.2g} (3 comparisons)" if math.isfinite(p) else "; p –"
+    """Per p value "; p .., Holm .. (m comparisons)", m the finite p values Holm's family counts."""
+    m = sum(math.isfinite(p) for p in pvalues)
+    return [f"; p {p:.2g}, Holm {h:.2g} ({m} comparisons)" if math.isfinite(p) else "; p –"
             for p, h in zip(pvalues, holm(pvalues))]
 
 
@@ -223,8 +213,10 @@ def table1_bunny(records: Records) -> list[Claim]:
         no_results = all(no_result(r) for r in mine)
         steps = sorted({int((r.get("fit") or {}).get("steps") or 0) for r in mine})
         what = "empty mesh" if all(empty_mesh(r) for r in mine) else "empty mesh or a surface off the shape"
+        lost = sum(no_result(r) for r in mine)
         measured = (f"{what} in all {len(mine)} runs ({'/'.join(map(str, steps))} steps)" if no_results
-                    else f"CD×10³ {_interval(s)}")
+                    else f"CD×10³ {_interval(s)}" + (f", with {lost} of {len(mine)} runs empty or off the shape "
+                                                     "(their chamfer in the mean)" if lost else ""))
         whose = ("our tuned DDF, not the paper's network" if experiment == "representations"
                  else "the paper's network")
         out.append(Claim(f"{model}: bunny chamfer at most the paper's 0.589×10³", src, paper,
@@ -714,8 +706,9 @@ def thesis_summary(records: Records) -> list[Claim]:
     else:
         out.append(_missing("G under 0.1 % of the grid SDF's storage", src, paper, "storage"))
     gan = [r for r in ok_records(records.get("gan_epochs") or []) if shape_name(r) == "bunny"]
-    grid_runs = [r for e in ("representations", "shape_suite") for r in ok_records(records.get(e) or [])
-                 if r.get("model") == "grid_sdf" and shape_name(r) == "bunny"]
+    grid_runs = list({r.get("key"): r for e in ("representations", "shape_suite")  # one run in both counts once
+                      for r in ok_records(records.get(e) or [])
+                      if r.get("model") == "grid_sdf" and shape_name(r) == "bunny"}.values())
     if gan and grid_runs and not all(no_result(r) for r in gan):
         g_cd = [chamfer_l2(r) for r in gan if not no_result(r)]
         grid_cd = [chamfer_l2(r) for r in grid_runs]

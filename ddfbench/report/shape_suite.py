@@ -23,9 +23,9 @@ import pandas as pd
 from scipy import stats as _scipy_stats
 
 from ddfbench.evaluate.metric_registry import by_name
-from ddfbench.report.across_shapes import bounded, fmt, geometric, holm, ratio, shape_means
+from ddfbench.report.across_shapes import bounded, fmt, geometric, ratio, shape_means
 from ddfbench.report.records import Record, no_result, no_result_label, ok_records, shape_name
-from ddfbench.report.stats import welch_ratio
+from ddfbench.report.stats import holm, welch_ratio
 from ddfbench.report.tables import pipe_table
 from ddfbench.truth.suite import SUITE_V1
 

@@ -1,5 +1,6 @@
-"""Statistics over seeds: mean, std, a Student t 95 % interval and interval overlap (paired
-differences: report.paired).
+"""Statistics over seeds: mean, std, a Student t 95 % interval, interval overlap, the one-sample t test's p, and
+Holm's correction of a family of p values (Holm 1979: step-down, controls the family-wise error). Paired
+differences: report.paired.
 
 The interval is the t interval of the mean over seeds, mean ± t(0.975, n−1)·s/√n, cut to the metric's range in
 tables (within_range); it needs n ≥ 2 (NaN bounds otherwise). It assumes roughly normal seed-to-seed scatter; with n = 3 it is wide
@@ -43,6 +44,28 @@ def summarize_values(values: Iterable[float], level: float = LEVEL) -> Summary:
     std = float(v.std(ddof=1))
     half = float(_scipy_stats.t.ppf(0.5 + level / 2, n - 1)) * std / math.sqrt(n)
     return Summary(mean, std, n, mean - half, mean + half)
+
+
+def t_test_p(s: Summary, against: float = 0.0) -> float:
+    """Two-sided p of the one-sample t test of the mean against `against` (NaN below n = 2; with no spread 0, or 1
+    when the mean is `against` itself)."""
+    if s.n < 2:
+        return math.nan
+    if not s.std > 0:
+        return 0.0 if s.mean != against else 1.0
+    t = (s.mean - against) / (s.std / math.sqrt(s.n))
+    return float(2 * _scipy_stats.t.sf(abs(t), s.n - 1))
+
+
+def holm(pvalues: Iterable[float]) -> list[float]:
+    """Holm-adjusted p values in the input order (NaN stays NaN and is not counted in the family)."""
+    p = list(pvalues)
+    order = sorted((i for i, x in enumerate(p) if math.isfinite(x)), key=lambda i: p[i])
+    m, out, running = len(order), [math.nan] * len(p), 0.0
+    for rank, i in enumerate(order):
+        running = max(running, min(1.0, (m - rank) * p[i]))
+        out[i] = running
+    return out
 
 
 SHARES = ("fscore@", "mask_iou", "normal_consistency", "closed")  # values in [0, 1]

@@ -7,7 +7,8 @@ Failed runs are counted per row and a row with fewer ok runs than the fullest ro
 (`n` shows "ok/expected" and a dagger), so nothing is silently averaged over fewer seeds.
 The metrics are those of `ddfbench.evaluate.metric_registry`. Per column (per shape where there are several)
 the best mean is bold only when its t interval over seeds overlaps no other row's; otherwise the
-rows whose intervals overlap the best are marked tied (report.stats). The metric's noise floor (GT
+rows whose intervals overlap the best are marked tied (report.stats). A row with an empty or off-shape run takes
+no part in that ranking. The metric's noise floor (GT
 against an independent resample of GT) is its own row per shape. The fit budget ("steps",
 "epochs" or "wall-clock") is a column, beside steps, epochs and fit seconds.
 """
@@ -119,7 +120,8 @@ def summarize(records: Iterable[dict[str, Any]]) -> pd.DataFrame:
     """One row per configuration (seeds pooled).
 
     Columns: model, shape, one per varying override key (its value, None where a record lacks it),
-    budget (steps | epochs | wall-clock), n (ok runs), n_failed, n_expected (runs of the fullest row), n_empty (ok runs whose reconstruction
+    budget (steps | epochs | wall-clock), eval_points (points a surface of the sampled metrics), n (ok runs),
+    n_failed, n_expected (runs of the fullest row), n_empty (ok runs whose reconstruction
     was empty: their metrics are the defined penalty), n_off (ok runs off the shape, `off_shape`), not_converged
     (every ok run empty or off the shape: not a method result, not ranked), errors, keys (record hashes),
     <metric>_mean, <metric>_std, <metric>_ci_lo, <metric>_ci_hi (t interval over seeds),
@@ -152,6 +154,7 @@ def summarize(records: Iterable[dict[str, Any]]) -> pd.DataFrame:
         for k in labels:
             entry[k] = members[0]["_labels"].get(k)
         entry["budget"] = members[0]["budget"]
+        entry["eval_points"] = members[0]["_config"].get("eval.n_points")  # a config key: one value per row
         entry["n"] = len(ok)
         entry["n_failed"] = len(members) - len(ok)
         entry["n_expected"] = n_expected
@@ -207,7 +210,8 @@ def _shown_metrics(df: pd.DataFrame) -> list[str]:
 
 
 def _label_columns(df: pd.DataFrame) -> list[str]:
-    hidden = {"n", "n_failed", "n_expected", "n_empty", "n_off", "not_converged", "errors", "keys"} | {f"{m}_n" for m in _metrics()}
+    hidden = {"n", "n_failed", "n_expected", "n_empty", "n_off", "not_converged", "errors", "keys", "eval_points"}
+    hidden |= {f"{m}_n" for m in _metrics()}
     return [c for c in df.columns if not c.endswith(("_mean", "_std", "_ci_lo", "_ci_hi")) and c not in hidden]
 
 
@@ -217,13 +221,20 @@ def _defined_in(row: pd.Series, metric: str) -> str:
     return f" (of {int(k)})" if k is not None and 0 < k < row["n"] else ""
 
 
+def ranked(df: pd.DataFrame) -> pd.DataFrame:
+    """The rows that take part in the ranking: those with no empty and no off-shape run (a penalty or a fit that
+    never found the shape in its mean is not a method result, and its wide interval would tie it with anything)."""
+    if "n_empty" not in df:
+        return df
+    return df[df["n_empty"] + df["n_off"] == 0]
+
+
 def marks(df: pd.DataFrame, metric: str) -> pd.Series:
-    """Per row "best", "tie" or "": per shape, the best mean of `metric` is "best" only when its
-    interval overlaps no other row's, else it and the rows overlapping it are "tie" (report.stats)."""
+    """Per row "best", "tie" or "": per shape, among the ranked rows, the best mean of `metric` is "best" only when
+    its interval overlaps no other row's, else it and the rows overlapping it are "tie" (report.stats)."""
     out = pd.Series("", index=df.index, dtype=object)
     better = _metrics()[metric].better
-    ranked = df[~df["not_converged"].astype(bool)] if "not_converged" in df else df
-    for _, part in ranked.groupby("shape", sort=False):
+    for _, part in ranked(df).groupby("shape", sort=False):
         means = part[f"{metric}_mean"].astype(float).tolist()
         intervals = list(zip(part[f"{metric}_ci_lo"].astype(float), part[f"{metric}_ci_hi"].astype(float)))
         for i, mark in best_and_ties(means, intervals, better).items():
@@ -275,6 +286,15 @@ def _cells(df: pd.DataFrame, bold: tuple[str, str]) -> tuple[list[str], list[lis
     return header, body
 
 
+def _points_phrase(df: pd.DataFrame) -> str:
+    """How many points a surface the sampled geometry metrics (and their noise floor) were measured on."""
+    counts = sorted({int(v) for v in df.get("eval_points", pd.Series(dtype=float)).dropna()})
+    if not counts:
+        return "the evaluation point count is not recorded"
+    return f"sampled geometry metrics on {' or '.join(f'{c:,}' for c in counts)} points a surface" + (
+        " (by row: table.csv's eval_points)" if len(counts) > 1 else "")
+
+
 def _partial_metrics(df: pd.DataFrame) -> bool:
     """Whether a shown metric of some row is defined in fewer of its runs than n."""
     return any(_defined_in(row, m) for _, row in df.iterrows() for m in _shown_metrics(df))
@@ -285,10 +305,12 @@ def _footnotes(df: pd.DataFrame) -> list[str]:
     if (df["n"] < df["n_expected"]).any():
         lines.append(f"{INCOMPLETE} fewer ok runs than the fullest row: its mean is over the ok runs only.")
     if "n_empty" in df and (df["n_empty"] > 0).any():
-        lines.append("(k empty): k runs gave an empty reconstruction; their geometry metrics are the defined penalty.")
+        lines.append("(k empty): k runs gave an empty reconstruction; their geometry metrics are the defined penalty, "
+                     "and the row is not ranked.")
     if "n_off" in df and (df["n_off"] > 0).any():
         lines.append(f"(k off the shape): k runs gave a surface with {OFF_SHAPE_RULE} (no sampled point of either "
-                     "surface near the other: the fit never found the shape); their measured metrics stay in the mean.")
+                     "surface near the other: the fit never found the shape); their measured metrics stay in the mean, and the "
+                     "row is not ranked.")
     if _partial_metrics(df):
         lines.append("(of k): the value is defined in k of the row's n runs (a depth error needs pixels that both "
                      "the render and the reference hit, a level offset a non-empty mesh); its mean, std and interval are over those k.")
@@ -315,7 +337,7 @@ def to_markdown(df: pd.DataFrame) -> str:
     lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
     lines += ["| " + " | ".join(r) + " |" for r in body]
     per_shape = " per shape" if df["shape"].nunique() > 1 else ""
-    lines += ["", f"Mean ± std over seeds, n runs. Bold: best per column{per_shape}, its {INTERVAL_NAME} "
+    lines += ["", f"Mean ± std over seeds, n runs; {_points_phrase(df)}. Bold: best per column{per_shape}, its {INTERVAL_NAME} "
               f"(table.csv: _ci_lo, _ci_hi; cut to the metric's range) overlapping no other row's; {TIE}: tied, the intervals of these "
               f"values overlap the best one's (with n = 1 every value is tied). "
               f"'{FLOOR_MODEL}': GT against an independent resample of GT (the sampled metric cannot resolve "
