@@ -109,6 +109,29 @@ def test_status_is_current_at_head_and_names_what_changed_but_not_a_membership_c
     assert os.path.isfile(os.path.join(ROOT, "conf", "suite", "v1.yaml"))
 
 
+def test_status_leaves_out_the_modules_that_write_nothing_into_a_record():
+    entry = suite.Entry("default", "reports/default")
+    # b4d251d changed the input checks alone; 2da0d56 the progress lines and the runner
+    _, changed = suite.stale(entry, [record(sha("b4d251d~1"), "grid_sdf", "grid_sdf")])
+    assert "ddfbench/run/checks.py" not in changed
+    _, changed = suite.stale(entry, [record(sha("2da0d56~1"), "grid_sdf", "grid_sdf")])
+    assert "ddfbench/run/runner.py" in changed and "ddfbench/run/progress.py" not in changed
+
+
+@pytest.mark.parametrize("model", ["mesh", "grid_sdf", "neural_sdf_tuned", "ddf_tuned", "ddf_paper", "gan_sdf"])
+def test_the_checks_a_job_passes_leave_its_config_as_it_was(tmp_path, model):
+    """ddfbench/run/checks.py is RESULT_NEUTRAL: a job it lets through runs the config it was given."""
+    import copy
+
+    from ddfbench.run.checks import check_job
+    from tests.hard_cases.conftest import compose
+
+    cfg = compose(f"model={model}", "scene=depth", out_dir=tmp_path)
+    before = copy.deepcopy(cfg)
+    check_job(cfg)
+    assert cfg == before
+
+
 def test_run_adds_the_overrides_after_the_double_dash_to_every_experiment_and_writes_each_report(monkeypatch):
     commands = []
 

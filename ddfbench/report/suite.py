@@ -10,7 +10,7 @@ jobs and prints a progress line per job with an ETA), then writes its report, th
 (FOLLOW_UPS: the tuning protocol's confirmation on fresh seeds) and writes it again; with --from-reports it first
 restores the reports' committed records into the results folder, so that a tier resumes across machines. `status` says,
 per report, the code commit its records come from and whether the code or config of a model it ran changed since
-(stale), by `git diff`.
+(stale), by `git diff` (the modules that write nothing into a record, RESULT_NEUTRAL, left out).
 """
 
 from __future__ import annotations
@@ -320,6 +320,12 @@ def sweep_ran_through(records_dir: str, exit_code: int, since: float) -> bool:
         return exit_code == 0
 
 
+# modules of the stale scope that write nothing into a record: they check a job's input before any work (a job they
+# let through runs as before), print a sweep's progress, mirror records to MLflow, or end an orphaned worker
+RESULT_NEUTRAL = ("ddfbench/run/checks.py", "ddfbench/run/progress.py", "ddfbench/run/tracking.py",
+                  "ddfbench/run/worker_guard.py")
+
+
 def stale(entry: Entry, records: list[dict[str, Any]]) -> tuple[str, list[str]]:
     """(the records' code commit(s), files of the models' families and configs changed or removed since the oldest
     one; a file added since is not a change to the code that ran)."""
@@ -335,6 +341,7 @@ def stale(entry: Entry, records: list[dict[str, Any]]) -> tuple[str, list[str]]:
         paths |= {f"ddfbench/models/{family}", f"ddfbench/models/{family}.py", f"conf/model/{model}.yaml",
                   f"conf/model/{family}.yaml"}
     existing = sorted(p for p in paths if os.path.exists(os.path.join(ROOT, p)))
+    existing += [f":(exclude){p}" for p in RESULT_NEUTRAL]
     changed = []
     for sha in shas:
         # a file added since cannot change what the records' code did (what uses it changed too): not counted
