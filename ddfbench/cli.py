@@ -282,18 +282,25 @@ def check_out_dir(args: list[str]) -> None:
         out_dir = override.value()
     if not isinstance(out_dir, str):
         raise InputError(f"out_dir={out_dir!r}: must name a folder")
-    if "${" in out_dir:  # an interpolation: the job's runner reports it
-        return
-    if not out_dir:
-        raise InputError("out_dir='': must name a folder")
-    if os.path.exists(out_dir) and not os.path.isdir(out_dir):
-        raise InputError(f"out_dir={out_dir}: exists and is not a folder")
+    if "${" not in out_dir:  # an interpolation: the job's runner reports it
+        writable_folder(out_dir, "out_dir=")
+
+
+def writable_folder(path: str, named: str) -> None:
+    """Make the folder `path` if it is missing; a one-line InputError (`named` + path first) where it cannot be made
+    or written."""
+    from ddfbench.core.errors import InputError
+
+    if not path:
+        raise InputError(f"{named}'': must name a folder")
+    if os.path.exists(path) and not os.path.isdir(path):
+        raise InputError(f"{named}{path}: exists and is not a folder")
     try:
-        os.makedirs(out_dir, exist_ok=True)
+        os.makedirs(path, exist_ok=True)
     except OSError as exc:
-        raise InputError(f"out_dir={out_dir}: cannot be made ({exc.strerror or exc})") from None
-    if not os.access(out_dir, os.W_OK | os.X_OK):
-        raise InputError(f"out_dir={out_dir}: cannot be written")
+        raise InputError(f"{named}{path}: cannot be made ({exc.strerror or exc})") from None
+    if not os.access(path, os.W_OK | os.X_OK):
+        raise InputError(f"{named}{path}: cannot be written")
 
 
 def experiment_help(args: list[str]) -> str | None:

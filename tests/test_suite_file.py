@@ -148,6 +148,32 @@ def test_run_adds_the_overrides_after_the_double_dash_to_every_experiment_and_wr
     assert [c[3] for c in reports][:2] == [os.path.join("out", "default"), os.path.join("out", "representations")]
 
 
+def test_a_sweep_with_failed_jobs_keeps_the_committed_report_and_writes_its_own_beside_the_records(
+        monkeypatch, tmp_path, capsys):
+    commands = []
+
+    class Failed:
+        returncode = 1  # ddfbench: k of n jobs failed
+
+    monkeypatch.setattr(suite.subprocess, "run", lambda cmd, **_: commands.append(cmd) or Failed())
+    assert suite.main(["run", "v1", "--tier", "core", "--only", "default", "--results", str(tmp_path),
+                       "--", "eval.n_points=0"]) == 1
+    (report,) = [c for c in commands if c[2] == "ddfbench.report"]
+    assert report[3:] == [str(tmp_path / "default"), "--out", str(tmp_path / "default" / "report")]
+    out = capsys.readouterr().out
+    assert "reports/default is kept as committed" in out
+    assert f"$ python -m ddfbench +experiment=default out_dir={tmp_path} quiet=true" in out  # a line to paste
+
+
+def test_run_refuses_a_results_path_that_is_not_a_folder_before_any_sweep(monkeypatch, tmp_path, capsys):
+    commands = []
+    monkeypatch.setattr(suite.subprocess, "run", lambda cmd, **_: commands.append(cmd))
+    (tmp_path / "afile").write_text("")
+    assert suite.main(["run", "v1", "--tier", "core", "--results", str(tmp_path / "afile")]) == 2
+    assert commands == []
+    assert capsys.readouterr().err == f"ddfbench.suite: --results {tmp_path / 'afile'}: exists and is not a folder\n"
+
+
 def test_run_runs_the_sweeps_a_report_asks_for_then_writes_the_report_again(monkeypatch, tmp_path):
     commands, asked = [], []
 

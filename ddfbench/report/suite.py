@@ -6,8 +6,9 @@ and the overrides its command line adds. `run --dry-run` prints each experiment'
 CPU-hours, from the committed records' wall time per job (the report's own records.jsonl.gz at the job's capacity level,
 else of its model, else any committed record of the same model, else unknown; a wall-clock job costs at least its bound;
 a fixed-work job's fit time is scaled to its own steps or epochs); `run` runs each experiment (Hydra resumes finished
-jobs and prints a progress line per job with an ETA), then writes its report, then runs the sweeps that report asks for
-(FOLLOW_UPS: the tuning protocol's confirmation on fresh seeds) and writes it again; with --from-reports it first
+jobs and prints a progress line per job with an ETA), then writes its report (over the committed one only when no
+job failed), then runs the sweeps that report asks for (FOLLOW_UPS: the tuning protocol's confirmation on fresh seeds)
+and writes it again; with --from-reports it first
 restores the reports' committed records into the results folder, so that a tier resumes across machines. `status` says,
 per report, the code commit its records come from and whether the code or config of a model it ran changed since
 (stale), by `git diff` (the modules that write nothing into a record, RESULT_NEUTRAL, left out).
@@ -18,6 +19,7 @@ from __future__ import annotations
 import argparse
 import datetime as dt
 import os
+import shlex
 import statistics
 import subprocess
 import sys
@@ -257,11 +259,15 @@ def print_plan(rows: list[dict[str, Any]]) -> None:
 def run(suite: str, tier: str, results: str, extra: list[str] | None = None, from_reports: bool = False,
         only: list[str] | None = None) -> int:
     """Run every experiment of the tier into results/ (resuming) with the suite's overrides and then `extra` (e.g. a
-    launcher, threads), then write its report; the worst exit code. from_reports: first restore each report's
+    launcher, threads), then write its report (write_report: into the committed folder only after a sweep without
+    failures); the worst exit code. from_reports: first restore each report's
     committed records into results/ (compact.restore), so that a tier cut short on another machine goes on where
     its committed records end (the report refuses records of two code commits: run it from the records' commit).
     only: the tier's experiments to run (default: all)."""
+    from ddfbench.cli import writable_folder
+
     entries = tier_entries(suite, tier, only)
+    writable_folder(results, "--results ")
     committed = {e.report: os.path.join(ROOT, e.report, compact.FILE) for e in entries}
     if from_reports:
         here = runs.code_sha()
@@ -279,14 +285,14 @@ def run(suite: str, tier: str, results: str, extra: list[str] | None = None, fro
                   f"in results, {left} left out to run again)", flush=True)
         cmd = [sys.executable, "-m", "ddfbench", f"+experiment={entry.experiment}", f"out_dir={results}", "quiet=true",
                *entry.overrides, *(extra or [])]
-        print("$", " ".join(cmd[1:]), flush=True)
+        print("$", shell_line(cmd), flush=True)
         started = time.time()
         swept = subprocess.run(cmd).returncode
-        rc = max(rc, swept if swept >= 0 else 1)  # a sweep killed by a signal has a negative code
+        swept = swept if swept >= 0 else 1  # a sweep killed by a signal has a negative code
+        rc = max(rc, swept)
         records_dir = os.path.join(results, str(OmegaConf.load(os.path.join(
             CONF_DIR, "experiment", f"{entry.experiment}.yaml")).get("experiment_name") or entry.experiment))
-        report = [sys.executable, "-m", "ddfbench.report", records_dir, "--out", os.path.join(ROOT, entry.report)]
-        rc = max(rc, subprocess.run(report).returncode)
+        rc = max(rc, write_report(entry, records_dir, swept))
         follow_up = FOLLOW_UPS.get(entry.experiment)
         sweeps = []
         if follow_up and os.path.isdir(records_dir):
@@ -297,11 +303,31 @@ def run(suite: str, tier: str, results: str, extra: list[str] | None = None, fro
                       "not run (run the tier again)", flush=True)
         for overrides in sweeps:  # complete sweeps of their own: the entry's overrides are not added
             cmd = [sys.executable, "-m", "ddfbench", *overrides, f"out_dir={results}", "quiet=true", *(extra or [])]
-            print("$", " ".join(cmd[1:]), flush=True)
-            rc = max(rc, subprocess.run(cmd).returncode)
+            print("$", shell_line(cmd), flush=True)
+            code = subprocess.run(cmd).returncode
+            swept = max(swept, code if code >= 0 else 1)
         if sweeps:
-            rc = max(rc, subprocess.run(report).returncode)
+            rc = max(rc, swept, write_report(entry, records_dir, swept))
     return rc
+
+
+def shell_line(cmd: list[str]) -> str:
+    """A command as a line to paste into a shell: `python -m ...` (the interpreter by its name), each word quoted
+    where the shell needs it."""
+    return shlex.join(["python", *cmd[1:]])
+
+
+def write_report(entry: Entry, records_dir: str, swept: int) -> int:
+    """Write the entry's report from records_dir: into its committed folder after a sweep that exited 0, else beside
+    the records (records_dir/report), keeping the committed report and its records as they are. The report's exit
+    code."""
+    out = os.path.join(ROOT, entry.report)
+    if swept != 0:
+        out = os.path.join(records_dir, "report")
+        print(f"{entry.experiment}: its sweep had failed jobs or was cut short (exit {swept}); {entry.report} is kept "
+              f"as committed and the report of these records is written to {out} (fix the cause and run the tier "
+              "again: finished runs are skipped)", flush=True)
+    return subprocess.run([sys.executable, "-m", "ddfbench.report", records_dir, "--out", out]).returncode
 
 
 def sweep_ran_through(records_dir: str, exit_code: int, since: float) -> bool:
