@@ -22,7 +22,10 @@ from omegaconf import DictConfig, OmegaConf
 
 from ddfbench.core import plugins
 from ddfbench.core.plugins import CONF_DIR  # plugins registers the `members` resolver the experiments use
+from ddfbench.overrides import MULTIRUN_FLAGS, check_overrides
 
+INTERRUPTED = ("interrupted; run the same command again to go on (finished runs are skipped, a fit resumes from its "
+               "last checkpoint)")
 KEY_FILE = "ddfbench_key.txt"  # written in each Hydra job folder: which record the job produced
 
 
@@ -92,6 +95,7 @@ class SweepTableCallback(Callback):
 
     def on_multirun_end(self, config: DictConfig, **kwargs: Any) -> None:
         from ddfbench.report.tables import console_table, summarize
+        from ddfbench.run.progress import sweep_total
         from ddfbench.run.runs import RECORD_FILE, read_record
 
         sweep_dir, out_dir = str(config.hydra.sweep.dir), str(config.get("out_dir", "results"))
@@ -109,10 +113,15 @@ class SweepTableCallback(Callback):
             print(console_table(summarize(records)) + f"records: {folder}\n"
                   f"full table, plots and gallery: python -m ddfbench.report {folder}   (writes {folder}/report)")
         failed = [r for r in records if r.get("status") != "ok"]
-        if failed:
-            first = failed[0]
-            print(f"ddfbench: {len(failed)} of {len(records)} jobs failed (first: {first.get('model')} on "
-                  f"{(first.get('shape') or {}).get('name')}: {first.get('error')})", file=sys.stderr)
+        total = max(sweep_total(sweep_dir) or 0, len(records))
+        missing = total - len(records)  # a job that could not write its record, or was killed before it did
+        if failed or missing:
+            parts = [f"{missing} left no record"] if missing else []
+            if failed:
+                first = failed[0]
+                parts.append(f"first: {first.get('model')} on {(first.get('shape') or {}).get('name')}: "
+                             f"{first.get('error')}")
+            print(f"ddfbench: {len(failed) + missing} of {total} jobs failed ({'; '.join(parts)})", file=sys.stderr)
             sys.exit(1)
 
 
@@ -120,6 +129,12 @@ def wants_default_experiment(args: list[str]) -> bool:
     """True when the command names no model, no experiment and no Hydra flag: run every family."""
     named = ("model=", "+model=", "experiment=", "+experiment=", "-")
     return not any(a.startswith(named) for a in args)
+
+
+def sweeps(args: list[str]) -> bool:
+    """Whether the command runs a sweep: -m, an experiment (each sets MULTIRUN), or the default run."""
+    return (any(a in MULTIRUN_FLAGS for a in args) or any(a.lstrip("+").startswith("experiment=") for a in args)
+            or wants_default_experiment(args))
 
 
 def _known_keys(group: str, args: list[str]) -> tuple[dict[str, Any], dict[str, Any]]:
@@ -149,7 +164,7 @@ def checked_overrides(args: list[str]) -> list[str]:
             out.append(arg)
             continue
         known, own = _known_keys(group, args)
-        plugins.strict_keys(group, {key.split(".")[0]: value}, known)
+        plugins.strict_keys(group, {key.split(".")[0]: value}, known, near=True)
         out.append(f"++{path}={value}" if key.split(".")[0] not in own and not arg.startswith("+") else arg)
     return out
 
@@ -161,6 +176,10 @@ def _at(cfg: Any, path: str) -> tuple[bool, Any]:
             return False, None
         cfg = cfg[part]
     return True, cfg
+
+
+def _both_nan(a: Any, b: Any) -> bool:
+    return isinstance(a, float) and isinstance(b, float) and a != a and b != b
 
 
 # the overrides that decide what a job's levels set: a plugin group's choice and the key that picks its level
@@ -194,7 +213,7 @@ def check_levels_keep(cfg: dict[str, Any], choices: dict[str, str], overrides: l
             continue
         given = arg.partition("=")[2]
         (found, asked), (_, ran) = _at(cfg, path), _at(leveled, path)
-        if found and asked != ran:
+        if found and asked != ran and not _both_nan(asked, ran):  # nan: the value checks name it
             keys = [k for k in plugins.LEVEL_KEYS.values() if cfg.get(k) is not None]
             raise InputError(f"{path}={given}: the level {' '.join(f'{k}={cfg[k]}' for k in keys)} of experiment "
                              f"{cfg.get('experiment_name')} sets {path} to {ran} for model {choices.get('model')}, "
@@ -372,6 +391,7 @@ def main() -> None:
         check_threads(sys.argv[1:])
         check_out_dir(sys.argv[1:])
         check_plain_keys(sys.argv[1:])
+        check_overrides(sys.argv[1:], sweeps=sweeps(sys.argv[1:]))
         sys.argv[1:] = checked_overrides(sys.argv[1:])
     except InputError as err:
         print(f"ddfbench: {err}", file=sys.stderr)
@@ -381,4 +401,8 @@ def main() -> None:
     if any(a in ("-h", "--help") for a in sys.argv[1:]) and (text := experiment_help(sys.argv[1:])) is not None:
         print(text, end="")
         return
-    task()
+    try:
+        task()
+    except KeyboardInterrupt:
+        print(f"ddfbench: {INTERRUPTED}", file=sys.stderr)
+        sys.exit(130)

@@ -128,7 +128,12 @@ def test_a_record_that_is_not_one_is_rerun_and_skipped_by_the_report(tmp_path, c
     ("domain", 0.0, "domain=0.0"), ("domain", -1, "domain=-1"), ("oracle.occupancy_rays", 0, "oracle.occupancy_rays=0"),
     ("model.faces", -1, "model.faces=-1"), ("train.probe_points", 0, "train.probe_points=0"),
     ("eval.mesh_resolution", 1, "eval.mesh_resolution=1"), ("eval.radii", [0.01, -1], "eval.radii[1]=-1"),
-    ("train.max_epochs", float("inf"), "train.max_epochs=inf")])
+    ("train.max_epochs", float("inf"), "train.max_epochs=inf"),
+    ("seed", 2**32, "seed=4294967296: must be an integer >= 0 and < 2**32"),
+    ("eval.n_points", 10**12, "eval.n_points=1000000000000: needs about 600 bytes a point (6e+05 GB), more than this "
+     "machine's"),
+    ("force", "maybe", "force='maybe': must be true or false"), ("quiet", "loud", "quiet='loud': must be true or false"),
+    ("eval.noise_floor", 2, "eval.noise_floor=2: must be true or false")])
 def test_an_out_of_range_value_is_a_failed_record_naming_it(tmp_path, where, value, named):
     cfg = job(tmp_path)
     section, _, key = where.partition(".")
@@ -138,6 +143,13 @@ def test_an_out_of_range_value_is_a_failed_record_naming_it(tmp_path, where, val
         cfg[section] = value
     rec = runner.run(cfg)
     assert rec["status"] == "failed" and rec["error"].startswith(named), rec["error"]
+
+
+def test_a_name_beside_a_mesh_file_is_one_line_saying_the_file_names_the_shape(tmp_path):
+    cfg = compose("shape=file", "shape.path=/data/big.obj", "shape.name=chair", "model=mesh", out_dir=tmp_path)
+    rec = runner.run(cfg)
+    assert rec["status"] == "failed" and rec["error"] == (
+        "shape.name='chair': with shape=file the shape takes its file's name (big); drop shape.name")
 
 
 @pytest.mark.parametrize("value", [-1e-3, float("nan"), 0.0])

@@ -94,6 +94,7 @@ def without_shape(args):
 
 @pytest.mark.parametrize("args,named", [(SMALL + ["eval.n_points=0"], "eval.n_points=0"),
                                         (SMALL + ["seed=abc"], "seed='abc'"),
+                                        (SMALL + ["train.max_seconds=nan"], "train.max_seconds=nan: must be a finite"),
                                         (without_shape(SMALL) + ["shape=file"], "shape.path is not set")])
 def test_a_bad_run_value_is_a_failed_record_naming_the_key(tmp_path, args, named):
     out = ddfbench(args, tmp_path)

@@ -44,3 +44,28 @@ def test_a_sweep_with_failed_jobs_names_how_many_and_the_first_by_job_number(tmp
         SweepTableCallback().on_multirun_end(config)
     assert stop.value.code == 1
     assert capsys.readouterr().err == "ddfbench: 2 of 3 jobs failed (first: m2 on cube: boom 2)\n"
+
+
+def test_a_sweep_whose_jobs_left_no_record_exits_1_and_says_how_many(tmp_path, capsys):
+    """Two jobs of three could not write their records (a read-only folder) or were killed first: the sweep
+    does not end as if it had succeeded."""
+    from omegaconf import OmegaConf
+
+    from ddfbench.cli import KEY_FILE, SweepTableCallback
+    from ddfbench.run import progress, runs
+
+    sweep, out = tmp_path / "sweep", tmp_path / "out"
+    progress.start_sweep(str(sweep), 3)
+    (sweep / "0").mkdir()
+    (sweep / "0" / KEY_FILE).write_text("e/k0\n")
+    (out / "e" / "k0").mkdir(parents=True)
+    runs.write_json_atomic(str(out / "e" / "k0" / runs.RECORD_FILE), {
+        "key": "k0", "experiment": "e", "status": "ok", "model": "m", "shape": {"name": "cube"}, "error": None,
+        "metrics": {}, "cost": {}, "config": {}})
+    (sweep / "1").mkdir()
+    (sweep / "1" / KEY_FILE).write_text("e/k1\n")  # its record.json was never written
+    config = OmegaConf.create({"hydra": {"sweep": {"dir": str(sweep)}}, "out_dir": str(out), "quiet": True})
+    with pytest.raises(SystemExit) as stop:
+        SweepTableCallback().on_multirun_end(config)
+    assert stop.value.code == 1
+    assert capsys.readouterr().err == "ddfbench: 2 of 3 jobs failed (2 left no record)\n"

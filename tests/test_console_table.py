@@ -22,3 +22,12 @@ def test_one_run_shows_its_values_without_a_spread():
     row = console_table(summarize([rec])).splitlines()[1].split()
     assert row[:3] == ["ddf_tuned", "bunny", "1"] and "±" not in " ".join(row)
     assert float(row[3]) == float(f"{rec['metrics']['chamfer_l2'] * 1e3:.3g}")
+
+
+def test_a_sweep_s_rows_show_the_settings_that_tell_them_apart():
+    """The ablation's seven rows are all `ddf bone`: the terminal shows the sampling levels each ran."""
+    records = read_compact(DEFAULT.replace("default", "ablation"))
+    lines = console_table(summarize(records)).splitlines()
+    assert lines[0].split()[:4] == ["model", "shape", "sampling", "n"]  # the sweep's axis: sampling={s_fc:..}
+    rows = {line.split()[2] for line in lines[1:]}
+    assert len(rows) == len(lines) - 1 == 7 and "{s_fc:30,s_dr:10,s_p:10}" in rows

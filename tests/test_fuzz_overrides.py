@@ -35,7 +35,12 @@ def nullable(ok):
 
 
 # key -> what a valid value is, written apart from ddfbench.run.checks (the property's oracle)
-VALID = {"domain": real(0.5), "seed": whole(0), "threads": nullable(whole(0)), "checkpoint_every": nullable(
+def flag(v):
+    return isinstance(v, bool)
+
+
+VALID = {"domain": real(0.5), "seed": lambda v: whole(0)(v) and v < 2**32, "force": flag, "quiet": flag,
+         "eval.noise_floor": flag, "eval.point_to_surface": flag, "threads": nullable(whole(0)), "checkpoint_every": nullable(
          lambda v: real(-math.inf)(v) and v >= 0), "train.budget": lambda v: v in ("steps", "wall-clock"),  # epochs: no max_epochs here
          "train.max_seconds": real(0.0), "train.max_steps": nullable(whole(1)),
          "train.max_epochs": nullable(real(0.0)), "train.n_labels": nullable(whole(1)), "train.n_probes": whole(0),

@@ -437,4 +437,9 @@ def main(argv: list[str] | None = None) -> int:
     except InputError as exc:
         print(f"ddfbench.suite: {exc}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:
+        from ddfbench.cli import INTERRUPTED
+
+        print(f"ddfbench.suite: {INTERRUPTED}", file=sys.stderr)
+        return 130
 

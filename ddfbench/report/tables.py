@@ -350,18 +350,21 @@ CONSOLE_METRICS = ("chamfer_l2", "fscore@0.01", "fit_s", "render_warm_s", "stora
 
 
 def console_table(df: pd.DataFrame) -> str:
-    """The few columns a terminal shows (model, shape, n, CONSOLE_METRICS: mean, and ± std where it is not 0) in
-    lines of at most about 100 characters; the full table is the report's (to_markdown)."""
+    """The few columns a terminal shows (model, shape, the sweep's varying settings, n, CONSOLE_METRICS: mean, and
+    ± std where it is not 0) in lines of about 100 characters without settings; the full table is the report's
+    (to_markdown)."""
     if df.empty:
         return "(no records)\n"
     registry = _metrics()
     short = {"render_warm_s": "frame s", "storage_bytes": "bytes"}
-    header = ["model", "shape", "n"] + [short.get(m, registry[m].label) for m in CONSOLE_METRICS]
+    settings = [c for c in _label_columns(df) if c not in ("model", "shape", "budget")]
+    header = ["model", "shape", *settings, "n"] + [short.get(m, registry[m].label) for m in CONSOLE_METRICS]
     rows = []
     for _, row in df.iterrows():
         if row["model"] == FLOOR_MODEL:
             continue
-        cells = [str(row["model"]), str(row["shape"]), _n_cell(row)]
+        cells = [str(row["model"]), str(row["shape"]), *("–" if row[c] is None else str(row[c]) for c in settings),
+                 _n_cell(row)]
         for name in CONSOLE_METRICS:
             mean, std, scale = row[f"{name}_mean"], row[f"{name}_std"], registry[name].scale
             spread = row["n"] > 1 and math.isfinite(std) and std > 0

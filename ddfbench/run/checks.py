@@ -39,24 +39,48 @@ def safe_name(value: Any, key: str) -> str:
 
 
 @functools.lru_cache(maxsize=None)
-def declared_keys() -> dict[str, frozenset[str]]:
-    """{"": top-level keys, "train" / "eval" / "oracle": their keys}: what conf/config.yaml, the train and eval
-    groups and the experiments (which may add keys of their own, such as `capacity`) declare."""
+def declared_values() -> dict[str, dict[str, tuple[Any, ...]]]:
+    """{"": top-level keys, "train" / "eval" / "oracle": their keys} -> every value a YAML gives the key: what
+    conf/config.yaml, the train and eval groups and the experiments (which may add keys of their own, such as
+    `capacity`) declare."""
     def yaml(*parts: str) -> dict[str, Any]:
         return OmegaConf.to_container(OmegaConf.load(os.path.join(plugins.CONF_DIR, *parts)), resolve=False)
 
+    out: dict[str, dict[str, list[Any]]] = {"": {g: [] for g in GROUPS}, "oracle": {}}
+
+    def declare(section: str, values: Mapping[str, Any]) -> None:
+        for key, value in values.items():
+            out.setdefault(section, {}).setdefault(key, []).append(value)
+
     config = yaml("config.yaml")
-    out: dict[str, set[str]] = {"": set(config) | set(GROUPS), "oracle": set(config["oracle"])}
+    declare("", config)
+    declare("oracle", config["oracle"])
     for section in ("train", "eval"):
-        out[section] = {k for name in plugins.names(section) for k in yaml(section, f"{name}.yaml")}
+        for name in plugins.names(section):
+            declare(section, yaml(section, f"{name}.yaml"))
     for name in plugins.names("experiment"):
         experiment = yaml("experiment", f"{name}.yaml")
-        out[""] |= set(experiment)
+        declare("", experiment)
         for section in CHECKED_SECTIONS:
             if isinstance(experiment.get(section), dict):
-                out[section] |= set(experiment[section])
-    out[""] -= {"defaults"}
-    return {k: frozenset(v) for k, v in out.items()}
+                declare(section, experiment[section])
+    out[""].pop("defaults", None)
+    return {section: {k: tuple(v) for k, v in keys.items()} for section, keys in out.items()}
+
+
+def declared_keys() -> dict[str, frozenset[str]]:
+    """{"": top-level keys, "train" / "eval" / "oracle": their keys} (declared_values)."""
+    return {section: frozenset(keys) for section, keys in declared_values().items()}
+
+
+def check_flags(cfg: Mapping[str, Any]) -> None:
+    """A key every YAML gives true or false (force, quiet, eval.noise_floor, ...) holds true or false."""
+    for section, keys in declared_values().items():
+        for key, values in keys.items():
+            if values and all(isinstance(v, bool) for v in values):
+                value = cfg.get(key) if not section else (cfg.get(section) or {}).get(key)
+                if not isinstance(value, bool):
+                    raise InputError(f"{section + '.' if section else ''}{key}={value!r}: must be true or false")
 
 
 def check_known_keys(cfg: Mapping[str, Any]) -> None:
@@ -88,6 +112,14 @@ INTEGERS = (("seed", 0), ("threads", 0), ("train.max_steps", 1), ("train.n_label
             ("train.probe_resolution", 2), ("eval.n_points", 1), ("eval.mesh_resolution", 2),
             ("oracle.occupancy_rays", 1))
 NULLABLE = ("threads", "train.max_steps", "train.max_epochs", "train.n_labels")
+SEED_LIMIT = 2**32  # seeds in [0, 2**32): numpy's and torch's generators take them, with the offsets the stages add
+BYTES_A_POINT = 600  # peak memory of the geometry metrics per sampled point (534 B measured at 10^6 on the bunny)
+POINT_COUNTS = ("eval.n_points", "train.probe_points")
+
+
+def physical_memory() -> int:
+    """This machine's memory in bytes."""
+    return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
 
 
 def check_numbers(cfg: Mapping[str, Any]) -> None:
@@ -97,6 +129,13 @@ def check_numbers(cfg: Mapping[str, Any]) -> None:
         value = _get(cfg, key)
         if not (value is None and key in NULLABLE):
             checked_int(value, key, least)
+    if cfg["seed"] >= SEED_LIMIT:
+        raise InputError(f"seed={cfg['seed']}: must be an integer >= 0 and < 2**32")
+    for key in POINT_COUNTS:
+        need, have = _get(cfg, key) * BYTES_A_POINT, physical_memory()
+        if need > have:
+            raise InputError(f"{key}={_get(cfg, key)}: needs about {BYTES_A_POINT} bytes a point ({need / 1e9:.3g} GB), "
+                             f"more than this machine's {have / 1e9:.3g} GB of memory")
     if cfg["train"]["max_epochs"] is not None:
         _number(cfg["train"]["max_epochs"], "train.max_epochs", lambda x: x > 0, "a finite number > 0 or null")
     _number(cfg["train"]["max_seconds"], "train.max_seconds", lambda x: x > 0, "a finite number of seconds > 0")
@@ -120,12 +159,27 @@ def check_numbers(cfg: Mapping[str, Any]) -> None:
         checked_int(model["faces"] or 0, "model.faces", 0)
 
 
+def check_shape_file(cfg: Mapping[str, Any]) -> None:
+    """shape=file names its shape by its file: a `shape.name` beside it that the catalog lacks was meant as the
+    file's name (a catalog shape ignores a `shape.path` a sweep sets for all its shapes)."""
+    from ddfbench.truth.shapes import catalog
+
+    shape = cfg.get("shape") or {}
+    name = str(shape.get("name"))
+    if shape.get("path") and name != "file" and name not in catalog() and not name.startswith("hard/"):
+        stem = os.path.splitext(os.path.basename(str(shape.get("path") or "")))[0] or "the file's name"
+        raise InputError(f"shape.name={shape.get('name')!r}: with shape=file the shape takes its file's name ({stem}); "
+                         "drop shape.name")
+
+
 def check_job(cfg: Mapping[str, Any]) -> None:
     """Every check of this module, in the order a user would fix them: names, keys, numbers; then the model's
     keys and types against its YAML (Representation.configure; a family may check more of its values there, the
     DDF does) and the scene's keys and values (render.scene.parse_scene), so that none waits for the fit."""
     safe_name(cfg.get("experiment_name", "single"), "experiment_name")
     check_known_keys(cfg)
+    check_shape_file(cfg)
+    check_flags(cfg)
     check_numbers(cfg)
     load_family(str(cfg["model"]["family"])).configure(cfg["model"])
     if (cfg.get("scene") or {}).get("outputs"):

@@ -45,6 +45,15 @@ def start_sweep(sweep_dir: str, total: int) -> None:
         fh.write("0")
 
 
+def sweep_total(sweep_dir: str) -> int | None:
+    """The job count start_sweep recorded for the sweep (None where it has no readable state)."""
+    try:
+        with open(os.path.join(sweep_dir, STATE_FILE)) as fh:
+            return int(json.load(fh)["total"])
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+
+
 def _next_count(sweep_dir: str) -> int:
     """Increment the sweep's finished-job counter under an exclusive lock; return the new value."""
     with open(os.path.join(sweep_dir, COUNT_FILE), "r+") as fh:

@@ -1,0 +1,70 @@
+"""The command line's overrides checked as words before Hydra reads them, each problem one line naming the override.
+
+Hydra answers these in 6 to 30 lines (a parse error, the config search path, a list of options): a value it cannot
+parse (`shape.path=/data/chair(1).obj`: such a value needs quotes), a config group option that has no file
+(`model=ddff`, `+experiment=ablaton`; the near names are given), and a list of values without a sweep
+(`model=mesh,mesh_lod500` without `-m`).
+"""
+
+from __future__ import annotations
+
+import difflib
+import os
+
+from hydra.core.override_parser.overrides_parser import OverridesParser
+from hydra.errors import HydraException
+
+from ddfbench.core.errors import InputError, first_line
+from ddfbench.core.plugins import CONF_DIR
+
+MULTIRUN_FLAGS = ("-m", "--multirun", "hydra.mode=MULTIRUN")
+NOT_CHOICES = ("hydra", "suite")  # folders of conf/ that a command does not choose from
+
+
+def is_override(arg: str) -> bool:
+    """A `key=value` word (with `+`, `++` or `~` before the key), not a flag."""
+    return "=" in arg and not arg.startswith("-")
+
+
+def parsed(arg: str):
+    """The override as Hydra reads it; a one-line InputError where it cannot."""
+    try:
+        (override,) = OverridesParser.create().parse_overrides([arg])
+    except HydraException as exc:
+        key, _, value = arg.partition("=")
+        raise InputError(f"{arg}: Hydra cannot read this value ({first_line(exc)}); a value with ( ) [ ] {{ }} , = ' \" or "
+                         f"spaces needs quotes: \"{key}='{value}'\"") from None
+    return override
+
+
+def group_options(group: str) -> list[str]:
+    """The options of a config group: the YAML files of conf/<group>/, by name."""
+    folder = os.path.join(CONF_DIR, group)
+    return sorted(f[:-5] for f in os.listdir(folder) if f.endswith(".yaml"))
+
+
+def check_choice(arg: str, group: str, value: object) -> None:
+    """A one-line InputError when `value` is not an option of the config group, with the near ones."""
+    options = group_options(group)
+    if not isinstance(value, str) or value in options or "${" in value:
+        return
+    near = difflib.get_close_matches(value, options, n=3, cutoff=0.6)
+    hint = f"did you mean {', '.join(near)}? " if near else ""
+    raise InputError(f"{arg}: no {group} named {value!r} ({hint}{group} options: {', '.join(options)})")
+
+
+def check_overrides(args: list[str], sweeps: bool) -> None:
+    """Every override of args readable, every config group choice an existing option, and a list of values only
+    where the command sweeps (sweeps: -m, an experiment, or the default run, which is one)."""
+    groups = {g for g in os.listdir(CONF_DIR) if os.path.isdir(os.path.join(CONF_DIR, g)) and g not in NOT_CHOICES}
+    for arg in (a for a in args if is_override(a)):
+        override = parsed(arg)
+        key = override.get_key_element().lstrip("+~")
+        if override.is_sweep_override() and not sweeps:
+            raise InputError(f"{arg}: a list of values is a sweep: add -m to run one job per value")
+        if key not in groups or arg.startswith("~"):
+            continue
+        values = list(override.sweep_string_iterator()) if override.is_discrete_sweep() else (
+            [] if override.is_sweep_override() else [override.value()])
+        for value in values:
+            check_choice(arg, key, value)

@@ -1,0 +1,45 @@
+"""The command line's overrides as words (ddfbench.overrides): each problem Hydra would answer in many lines is one
+line naming the override, before Hydra composes."""
+
+import pytest
+
+from ddfbench import cli
+from ddfbench.core.errors import InputError
+from ddfbench.overrides import check_overrides
+
+
+@pytest.mark.parametrize("arg,line", [
+    ("model=ddff", "model=ddff: no model named 'ddff' (did you mean ddf? model options: ddf, ddf_line_grid,"),
+    ("+experiment=ablaton", "+experiment=ablaton: no experiment named 'ablaton' (did you mean ablation, ablation_grid?"),
+    ("shape=bunnny", "shape=bunnny: no shape named 'bunnny' (did you mean bunny, bunny10k?"),
+    ("+form=fast", "+form=fast: no form named 'fast' (form options: quick)"),
+    ("model=mesh,mesh_lodd500", "model=mesh,mesh_lodd500: no model named 'mesh_lodd500' (did you mean mesh_lod500,"),
+])
+def test_a_config_option_that_has_no_file_is_one_line_with_the_near_names(arg, line):
+    with pytest.raises(InputError) as err:
+        check_overrides([arg], sweeps=True)
+    assert str(err.value).startswith(line) and "\n" not in str(err.value)
+
+
+def test_a_list_of_values_needs_a_sweep():
+    with pytest.raises(InputError, match=r"^model=mesh,mesh_lod500: a list of values is a sweep: add -m"):
+        check_overrides(["model=mesh,mesh_lod500"], sweeps=False)
+    check_overrides(["model=mesh,mesh_lod500", "seed=0,1"], sweeps=True)
+    assert not cli.sweeps(["model=mesh,mesh_lod500"])
+    assert cli.sweeps(["model=mesh,mesh_lod500", "-m"]) and cli.sweeps(["+experiment=ablation"])
+    assert cli.sweeps(["shape=cow"])  # the default run: a sweep over the families
+
+
+def test_a_value_hydra_cannot_read_names_the_override_and_how_to_quote_it():
+    with pytest.raises(InputError) as err:
+        check_overrides(["shape=file", "shape.path=/data/chair(1).obj"], sweeps=False)
+    assert str(err.value) == ("shape.path=/data/chair(1).obj: Hydra cannot read this value (mismatched input '(' "
+                              "expecting <EOF>); a value with ( ) [ ] { } , = ' \" or spaces needs quotes: "
+                              "\"shape.path='/data/chair(1).obj'\"")
+    check_overrides(["shape=file", "shape.path='/data/chair(1).obj'"], sweeps=False)
+
+
+def test_what_hydra_reads_passes():
+    check_overrides(["model=ddf_tuned", "shape=cube", "scene=depth", "sampling=surface", "sampling.s_p=20",
+                     "hydra/launcher=local_parallel", "train.max_steps=5", "eval.radii=[0.01,0.02]", "~tracking",
+                     "+form=quick", "model=null", "-m", "--help"], sweeps=True)
