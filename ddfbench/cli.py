@@ -22,7 +22,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from ddfbench.core import plugins
 from ddfbench.core.plugins import CONF_DIR  # plugins registers the `members` resolver the experiments use
-from ddfbench.overrides import MULTIRUN_FLAGS, check_overrides
+from ddfbench.run.overrides import MULTIRUN_FLAGS, check_overrides
 
 INTERRUPTED = ("interrupted; run the same command again to go on (finished runs are skipped, a fit resumes from its "
                "last checkpoint)")
@@ -132,9 +132,12 @@ def wants_default_experiment(args: list[str]) -> bool:
 
 
 def sweeps(args: list[str]) -> bool:
-    """Whether the command runs a sweep: -m, an experiment (each sets MULTIRUN), or the default run."""
-    return (any(a in MULTIRUN_FLAGS for a in args) or any(a.lstrip("+").startswith("experiment=") for a in args)
-            or wants_default_experiment(args))
+    """Whether the command runs a sweep: -m, else an experiment (each sets MULTIRUN) or the default run, unless
+    hydra.mode=RUN."""
+    if any(a in MULTIRUN_FLAGS for a in args):
+        return True
+    return "hydra.mode=RUN" not in args and (any(a.lstrip("+").startswith("experiment=") for a in args)
+                                             or wants_default_experiment(args))
 
 
 def _known_keys(group: str, args: list[str]) -> tuple[dict[str, Any], dict[str, Any]]:
@@ -302,24 +305,9 @@ def check_out_dir(args: list[str]) -> None:
     if not isinstance(out_dir, str):
         raise InputError(f"out_dir={out_dir!r}: must name a folder")
     if "${" not in out_dir:  # an interpolation: the job's runner reports it
+        from ddfbench.run.checks import writable_folder
+
         writable_folder(out_dir, "out_dir=")
-
-
-def writable_folder(path: str, named: str) -> None:
-    """Make the folder `path` if it is missing; a one-line InputError (`named` + path first) where it cannot be made
-    or written."""
-    from ddfbench.core.errors import InputError
-
-    if not path:
-        raise InputError(f"{named}'': must name a folder")
-    if os.path.exists(path) and not os.path.isdir(path):
-        raise InputError(f"{named}{path}: exists and is not a folder")
-    try:
-        os.makedirs(path, exist_ok=True)
-    except OSError as exc:
-        raise InputError(f"{named}{path}: cannot be made ({exc.strerror or exc})") from None
-    if not os.access(path, os.W_OK | os.X_OK):
-        raise InputError(f"{named}{path}: cannot be written")
 
 
 def experiment_help(args: list[str]) -> str | None:

@@ -129,7 +129,7 @@ def test_a_record_that_is_not_one_is_rerun_and_skipped_by_the_report(tmp_path, c
     ("model.faces", -1, "model.faces=-1"), ("train.probe_points", 0, "train.probe_points=0"),
     ("eval.mesh_resolution", 1, "eval.mesh_resolution=1"), ("eval.radii", [0.01, -1], "eval.radii[1]=-1"),
     ("train.max_epochs", float("inf"), "train.max_epochs=inf"),
-    ("seed", 2**32, "seed=4294967296: must be an integer >= 0 and < 2**32"),
+    ("seed", 2**63, "seed=9223372036854775808: must be an integer >= 0 and < 2**63"),
     ("eval.n_points", 10**12, "eval.n_points=1000000000000: needs about 600 bytes a point (6e+05 GB), more than this "
      "machine's"),
     ("force", "maybe", "force='maybe': must be true or false"), ("quiet", "loud", "quiet='loud': must be true or false"),

@@ -39,7 +39,7 @@ def flag(v):
     return isinstance(v, bool)
 
 
-VALID = {"domain": real(0.5), "seed": lambda v: whole(0)(v) and v < 2**32, "force": flag, "quiet": flag,
+VALID = {"domain": real(0.5), "seed": lambda v: whole(0)(v) and v < 2**63, "force": flag, "quiet": flag,
          "eval.noise_floor": flag, "eval.point_to_surface": flag, "threads": nullable(whole(0)), "checkpoint_every": nullable(
          lambda v: real(-math.inf)(v) and v >= 0), "train.budget": lambda v: v in ("steps", "wall-clock"),  # epochs: no max_epochs here
          "train.max_seconds": real(0.0), "train.max_steps": nullable(whole(1)),

@@ -1,11 +1,11 @@
-"""The command line's overrides as words (ddfbench.overrides): each problem Hydra would answer in many lines is one
+"""The command line's overrides as words (ddfbench.run.overrides): each problem Hydra would answer in many lines is one
 line naming the override, before Hydra composes."""
 
 import pytest
 
 from ddfbench import cli
 from ddfbench.core.errors import InputError
-from ddfbench.overrides import check_overrides
+from ddfbench.run.overrides import check_overrides
 
 
 @pytest.mark.parametrize("arg,line", [
@@ -43,3 +43,17 @@ def test_what_hydra_reads_passes():
     check_overrides(["model=ddf_tuned", "shape=cube", "scene=depth", "sampling=surface", "sampling.s_p=20",
                      "hydra/launcher=local_parallel", "train.max_steps=5", "eval.radii=[0.01,0.02]", "~tracking",
                      "+form=quick", "model=null", "-m", "--help"], sweeps=True)
+
+
+def test_globs_interpolations_and_other_config_folders_are_left_to_hydra():
+    check_overrides(["shape=glob(cu*)", "model=mesh", "-m"], sweeps=True)  # a glob needs Hydra's config loader
+    check_overrides(["shape=cube,${oc.env:MY_SHAPE}", "-m"], sweeps=True)  # resolved when the job composes
+    for flag in (["-cd", "/data/myconf"], ["--config-dir=/data/myconf"], ["hydra.searchpath=[file:///data/myconf]"]):
+        check_overrides([*flag, "+experiment=mine", "shape=chair"], sweeps=True)  # options of another folder
+    with pytest.raises(InputError, match="no shape named 'chair'"):
+        check_overrides(["+experiment=default", "shape=chair"], sweeps=True)
+
+
+def test_hydra_mode_run_is_not_a_sweep_unless_m_is_given():
+    assert not cli.sweeps(["+experiment=default", "hydra.mode=RUN", "seed=0,1"])
+    assert cli.sweeps(["+experiment=default", "hydra.mode=RUN", "-m"])

@@ -174,13 +174,13 @@ def test_run_refuses_a_results_path_that_is_not_a_folder_before_any_sweep(monkey
     assert capsys.readouterr().err == f"ddfbench.suite: --results {tmp_path / 'afile'}: exists and is not a folder\n"
 
 
-def test_run_runs_the_sweeps_a_report_asks_for_then_writes_the_report_again(monkeypatch, tmp_path):
+def test_run_runs_the_sweeps_the_records_ask_for_then_writes_the_report(monkeypatch, tmp_path):
     commands, asked = [], []
 
     class Done:
         returncode = 0
 
-    def confirmation(records):  # the protocol's follow-up, on the records the first report was written from
+    def confirmation(records):  # the protocol's follow-up, on the sweep's records
         asked.append(records)
         return [["+experiment=tune_finalists", "model=m", "capacity=a,b", "seed=3,4,5"]]
 
@@ -193,21 +193,29 @@ def test_run_runs_the_sweeps_a_report_asks_for_then_writes_the_report_again(monk
     commands.clear()
     (tmp_path / "tune_finalists").mkdir()
     assert suite.main(run) == 0 and asked == [[]]
-    report = [commands[1][2:], commands[3][2:]]
-    assert [c[2] for c in commands] == ["ddfbench", "ddfbench.report", "ddfbench", "ddfbench.report"]
-    assert commands[2][3:] == ["+experiment=tune_finalists", "model=m", "capacity=a,b", "seed=3,4,5",
+    assert [c[2] for c in commands] == ["ddfbench", "ddfbench", "ddfbench.report"]  # the report once, at the end
+    assert commands[1][3:] == ["+experiment=tune_finalists", "model=m", "capacity=a,b", "seed=3,4,5",
                                f"out_dir={tmp_path}", "quiet=true", "threads=1"]  # into the same out_dir
-    assert report[0] == report[1] == ["ddfbench.report", str(tmp_path / "tune_finalists"), "--out",
-                                      os.path.join(ROOT, "reports", "tune_finalists")]
+    assert commands[2][2:] == ["ddfbench.report", str(tmp_path / "tune_finalists"), "--out",
+                               os.path.join(ROOT, "reports", "tune_finalists")]
+    # a follow-up that fails: the committed report is kept, this one goes beside the records
+    commands.clear()
+    codes = iter([0, 1, 0])
+    monkeypatch.setattr(suite.subprocess, "run", lambda cmd, **_: commands.append(cmd) or type(
+        "Ran", (), {"returncode": next(codes)}))
+    assert suite.main(run) == 1
+    assert commands[2][2:] == ["ddfbench.report", str(tmp_path / "tune_finalists"), "--out",
+                               str(tmp_path / "tune_finalists" / "report")]
     # a sweep cut short (killed: a negative code): its report is written, the follow-ups wait for all its runs
     commands.clear()
+    asked.clear()
     ran_through["value"] = False
 
     class Killed:
         returncode = -9
 
     monkeypatch.setattr(suite.subprocess, "run", lambda cmd, **_: commands.append(cmd) or Killed())
-    assert suite.main(run) == 1 and [c[2] for c in commands] == ["ddfbench", "ddfbench.report"] and len(asked) == 1
+    assert suite.main(run) == 1 and [c[2] for c in commands] == ["ddfbench", "ddfbench.report"] and asked == []
 
 
 def test_run_from_reports_restores_each_report_s_committed_records_before_its_sweep(monkeypatch, tmp_path, capsys):

@@ -200,7 +200,7 @@ def protocol(records: list[Record]) -> dict[str, Any]:
 def confirmation_sweeps(records: list[Record]) -> list[list[str]]:
     """The overrides of each sweep the protocol still needs: one per model whose confirmation has runs without an ok
     record (python -m ddfbench OVERRIDES ... into the same results folder, which skips the runs done; then the
-    report again)."""
+    report)."""
     return [_confirmation_sweep(v, v["confirm"]) for v in protocol(records)["verdicts"]
             if "confirm" in v and v["confirm"]["missing"]]
 

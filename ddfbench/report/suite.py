@@ -6,9 +6,9 @@ and the overrides its command line adds. `run --dry-run` prints each experiment'
 CPU-hours, from the committed records' wall time per job (the report's own records.jsonl.gz at the job's capacity level,
 else of its model, else any committed record of the same model, else unknown; a wall-clock job costs at least its bound;
 a fixed-work job's fit time is scaled to its own steps or epochs); `run` runs each experiment (Hydra resumes finished
-jobs and prints a progress line per job with an ETA), then writes its report (over the committed one only when no
-job failed), then runs the sweeps that report asks for (FOLLOW_UPS: the tuning protocol's confirmation on fresh seeds)
-and writes it again; with --from-reports it first
+jobs and prints a progress line per job with an ETA), then the sweeps its report asks for (FOLLOW_UPS: the tuning
+protocol's confirmation on fresh seeds, from the records), then writes its report (over the committed one only when no
+job failed); with --from-reports it first
 restores the reports' committed records into the results folder, so that a tier resumes across machines. `status` says,
 per report, the code commit its records come from and whether the code or config of a model it ran changed since
 (stale), by `git diff` (the modules that write nothing into a record, RESULT_NEUTRAL, left out).
@@ -259,12 +259,12 @@ def print_plan(rows: list[dict[str, Any]]) -> None:
 def run(suite: str, tier: str, results: str, extra: list[str] | None = None, from_reports: bool = False,
         only: list[str] | None = None) -> int:
     """Run every experiment of the tier into results/ (resuming) with the suite's overrides and then `extra` (e.g. a
-    launcher, threads), then write its report (write_report: into the committed folder only after a sweep without
-    failures); the worst exit code. from_reports: first restore each report's
+    launcher, threads), then the sweeps its records ask for (FOLLOW_UPS), then write its report (write_report: into
+    the committed folder only when none of them had a failed job); the worst exit code. from_reports: first restore each report's
     committed records into results/ (compact.restore), so that a tier cut short on another machine goes on where
     its committed records end (the report refuses records of two code commits: run it from the records' commit).
     only: the tier's experiments to run (default: all)."""
-    from ddfbench.cli import writable_folder
+    from ddfbench.run.checks import writable_folder
 
     entries = tier_entries(suite, tier, only)
     writable_folder(results, "--results ")
@@ -292,7 +292,6 @@ def run(suite: str, tier: str, results: str, extra: list[str] | None = None, fro
         rc = max(rc, swept)
         records_dir = os.path.join(results, str(OmegaConf.load(os.path.join(
             CONF_DIR, "experiment", f"{entry.experiment}.yaml")).get("experiment_name") or entry.experiment))
-        rc = max(rc, write_report(entry, records_dir, swept))
         follow_up = FOLLOW_UPS.get(entry.experiment)
         sweeps = []
         if follow_up and os.path.isdir(records_dir):
@@ -306,8 +305,7 @@ def run(suite: str, tier: str, results: str, extra: list[str] | None = None, fro
             print("$", shell_line(cmd), flush=True)
             code = subprocess.run(cmd).returncode
             swept = max(swept, code if code >= 0 else 1)
-        if sweeps:
-            rc = max(rc, swept, write_report(entry, records_dir, swept))
+        rc = max(rc, swept, write_report(entry, records_dir, swept))  # once its follow-ups have run: they read records
     return rc
 
 
@@ -346,10 +344,11 @@ def sweep_ran_through(records_dir: str, exit_code: int, since: float) -> bool:
         return exit_code == 0
 
 
-# modules of the stale scope that write nothing into a record: they check a job's input before any work (a job they
-# let through runs as before), print a sweep's progress, mirror records to MLflow, or end an orphaned worker
-RESULT_NEUTRAL = ("ddfbench/run/checks.py", "ddfbench/run/progress.py", "ddfbench/run/tracking.py",
-                  "ddfbench/run/worker_guard.py")
+# modules of the stale scope that write nothing into a record: they check a job's input or the command's words before
+# any work (a job they let through runs as before), print a sweep's progress, mirror records to MLflow, or end an
+# orphaned worker
+RESULT_NEUTRAL = ("ddfbench/run/checks.py", "ddfbench/run/overrides.py", "ddfbench/run/progress.py",
+                  "ddfbench/run/tracking.py", "ddfbench/run/worker_guard.py")
 
 
 def stale(entry: Entry, records: list[dict[str, Any]]) -> tuple[str, list[str]]:
@@ -438,8 +437,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"ddfbench.suite: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        from ddfbench.cli import INTERRUPTED
-
-        print(f"ddfbench.suite: {INTERRUPTED}", file=sys.stderr)
+        print("ddfbench.suite: interrupted; run the same command again to go on (finished runs are skipped)",
+              file=sys.stderr)
         return 130
 

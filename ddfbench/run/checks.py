@@ -38,6 +38,21 @@ def safe_name(value: Any, key: str) -> str:
     return value
 
 
+def writable_folder(path: str, named: str) -> None:
+    """Make the folder `path` if it is missing; a one-line InputError (`named` + path first) where it cannot be made
+    or written."""
+    if not path:
+        raise InputError(f"{named}'': must name a folder")
+    if os.path.exists(path) and not os.path.isdir(path):
+        raise InputError(f"{named}{path}: exists and is not a folder")
+    try:
+        os.makedirs(path, exist_ok=True)
+    except OSError as exc:
+        raise InputError(f"{named}{path}: cannot be made ({exc.strerror or exc})") from None
+    if not os.access(path, os.W_OK | os.X_OK):
+        raise InputError(f"{named}{path}: cannot be written")
+
+
 @functools.lru_cache(maxsize=None)
 def declared_values() -> dict[str, dict[str, tuple[Any, ...]]]:
     """{"": top-level keys, "train" / "eval" / "oracle": their keys} -> every value a YAML gives the key: what
@@ -112,7 +127,8 @@ INTEGERS = (("seed", 0), ("threads", 0), ("train.max_steps", 1), ("train.n_label
             ("train.probe_resolution", 2), ("eval.n_points", 1), ("eval.mesh_resolution", 2),
             ("oracle.occupancy_rays", 1))
 NULLABLE = ("threads", "train.max_steps", "train.max_epochs", "train.n_labels")
-SEED_LIMIT = 2**32  # seeds in [0, 2**32): numpy's and torch's generators take them, with the offsets the stages add
+SEED_LIMIT = 2**63  # seeds in [0, 2**63): int64 in tables; with the offsets the stages add (up to +11) numpy's and
+# torch's generators still take them (they refuse 2**64 and above)
 BYTES_A_POINT = 600  # peak memory of the geometry metrics per sampled point (534 B measured at 10^6 on the bunny)
 POINT_COUNTS = ("eval.n_points", "train.probe_points")
 
@@ -130,7 +146,7 @@ def check_numbers(cfg: Mapping[str, Any]) -> None:
         if not (value is None and key in NULLABLE):
             checked_int(value, key, least)
     if cfg["seed"] >= SEED_LIMIT:
-        raise InputError(f"seed={cfg['seed']}: must be an integer >= 0 and < 2**32")
+        raise InputError(f"seed={cfg['seed']}: must be an integer >= 0 and < 2**63")
     for key in POINT_COUNTS:
         need, have = _get(cfg, key) * BYTES_A_POINT, physical_memory()
         if need > have:

@@ -12,12 +12,14 @@ import difflib
 import os
 
 from hydra.core.override_parser.overrides_parser import OverridesParser
+from hydra.core.override_parser.types import ValueType
 from hydra.errors import HydraException
 
 from ddfbench.core.errors import InputError, first_line
 from ddfbench.core.plugins import CONF_DIR
 
 MULTIRUN_FLAGS = ("-m", "--multirun", "hydra.mode=MULTIRUN")
+OTHER_CONFIGS = ("-cd", "--config-dir", "-cp", "--config-path", "-cn", "--config-name")
 NOT_CHOICES = ("hydra", "suite")  # folders of conf/ that a command does not choose from
 
 
@@ -46,25 +48,39 @@ def group_options(group: str) -> list[str]:
 def check_choice(arg: str, group: str, value: object) -> None:
     """A one-line InputError when `value` is not an option of the config group, with the near ones."""
     options = group_options(group)
-    if not isinstance(value, str) or value in options or "${" in value:
+    if not isinstance(value, str) or value in options:
         return
     near = difflib.get_close_matches(value, options, n=3, cutoff=0.6)
     hint = f"did you mean {', '.join(near)}? " if near else ""
     raise InputError(f"{arg}: no {group} named {value!r} ({hint}{group} options: {', '.join(options)})")
 
 
+def other_configs(args: list[str]) -> bool:
+    """Whether the command adds or swaps config folders (-cd, -cp, -cn, hydra.searchpath): their options are Hydra's
+    to check."""
+    return any(a in OTHER_CONFIGS or a.startswith(tuple(f"{f}=" for f in OTHER_CONFIGS) + ("hydra.searchpath",))
+               for a in args)
+
+
 def check_overrides(args: list[str], sweeps: bool) -> None:
-    """Every override of args readable, every config group choice an existing option, and a list of values only
-    where the command sweeps (sweeps: -m, an experiment, or the default run, which is one)."""
+    """Every override of args readable, every config group choice an existing option of conf/ (unless the command
+    adds config folders), and a list of values only where the command sweeps (sweeps: -m, an experiment, or the
+    default run, which is one). A glob, range or interpolation among the values is left to Hydra."""
     groups = {g for g in os.listdir(CONF_DIR) if os.path.isdir(os.path.join(CONF_DIR, g)) and g not in NOT_CHOICES}
+    own_configs = not other_configs(args)
     for arg in (a for a in args if is_override(a)):
         override = parsed(arg)
         key = override.get_key_element().lstrip("+~")
         if override.is_sweep_override() and not sweeps:
             raise InputError(f"{arg}: a list of values is a sweep: add -m to run one job per value")
-        if key not in groups or arg.startswith("~"):
+        if key not in groups or arg.startswith("~") or not own_configs:
             continue
-        values = list(override.sweep_string_iterator()) if override.is_discrete_sweep() else (
-            [] if override.is_sweep_override() else [override.value()])
+        if not override.is_sweep_override():
+            values = [override.value()]
+        elif override.value_type in (ValueType.CHOICE_SWEEP, ValueType.SIMPLE_CHOICE_SWEEP):
+            values = list(override.sweep_string_iterator())
+        else:  # a glob (Hydra expands it against the options itself), a range or an interval
+            values = []
         for value in values:
-            check_choice(arg, key, value)
+            if not (isinstance(value, str) and "$" in value):  # an interpolation: resolved when the job composes
+                check_choice(arg, key, value)
