@@ -225,9 +225,9 @@ def check_levels_keep(cfg: dict[str, Any], choices: dict[str, str], overrides: l
 
 
 def check_plain_keys(args: list[str]) -> None:
-    """A one-line InputError, with the near-miss names, for a `key=` or `train|eval|oracle.key=` override without
-    `+` that nothing declares (`train.max_step=5`), which Hydra would refuse in several lines; the `+` form is
-    checked per job (ddfbench.run.checks.check_known_keys)."""
+    """A one-line InputError, with the near-miss names, for a `key=` or `train|eval|oracle|scene.key=` override
+    without `+` that nothing declares (`train.max_step=5`, `scene.widht=3`), which Hydra would refuse in several
+    lines; the `+` form is checked per job (ddfbench.run.checks.check_known_keys, render.scene)."""
     from ddfbench.core.errors import InputError
     from ddfbench.run.checks import CHECKED_SECTIONS, declared_keys
 
@@ -243,6 +243,9 @@ def check_plain_keys(args: list[str]) -> None:
             plugins.strict_keys("", {section: value}, dict.fromkeys(known[""]), near=True)
         elif section in CHECKED_SECTIONS:
             plugins.strict_keys(section, {key.split(".")[0]: value}, dict.fromkeys(known[section]), near=True)
+        elif section == "scene":  # the keys every scene preset shares (conf/scene/*.yaml)
+            scene_keys = {k for name in plugins.names("scene") for k in plugins.defaults("scene", name)}
+            plugins.strict_keys(section, {key.split(".")[0]: value}, dict.fromkeys(scene_keys), near=True)
 
 
 def check_sweep_levels(config: DictConfig) -> None:

@@ -88,6 +88,7 @@ def test_a_key_nothing_reads_is_a_failed_record_naming_it(tmp_path, section, key
                                        ("sed=3", "sed: unknown key (did you mean seed"),
                                        ("eval.n_pointz=3", "eval.n_pointz: unknown key (did you mean n_points?"),
                                        ("oracle.backnd=embree", "oracle.backnd: unknown key (did you mean backend?"),
+                                       ("scene.widht=3", "scene.widht: unknown key (did you mean width?"),
                                        ("experiment=ablation", "experiment=ablation: experiment is a config group "
                                                                "outside the defaults: use +experiment=ablation"),
                                        ("form=quick", "form=quick: form is a config group outside the defaults: "
@@ -101,6 +102,7 @@ def test_the_same_key_without_plus_is_one_line_before_hydra_composes(arg, named)
 def test_plain_overrides_of_declared_keys_groups_and_hydra_pass_the_key_check():
     cli.check_plain_keys(["--multirun", "model=mesh,grid_sdf", "shape=cube", "seed=0,1", "capacity=null", "threads=1",
                           "train.max_steps=5", "eval.n_points=10", "oracle.backend=embree", "scene.width=8",
+                          "scene.cameras.n=3", "scene.lights=[]",
                           "model.lr=1e-3", "+train.max_step=5", "hydra/launcher=ray", "hydra.launcher.n_jobs=2",
                           "~tracking", "experiment_name=x"])
 
@@ -143,6 +145,14 @@ def test_an_out_of_range_value_is_a_failed_record_naming_it(tmp_path, where, val
         cfg[section] = value
     rec = runner.run(cfg)
     assert rec["status"] == "failed" and rec["error"].startswith(named), rec["error"]
+
+
+@pytest.mark.parametrize("section,key", [("model", "family"), ("sampling", "strategy")])
+def test_a_yaml_that_names_no_module_is_one_line_saying_so(tmp_path, section, key):
+    cfg = job(tmp_path)
+    cfg[section] = {k: v for k, v in cfg[section].items() if k != key}
+    rec = runner.run(cfg)
+    assert rec["status"] == "failed" and rec["error"].startswith(f"{section}.{key}: not set: the {section} YAML names")
 
 
 def test_a_name_beside_a_mesh_file_is_one_line_saying_the_file_names_the_shape(tmp_path):

@@ -4,6 +4,7 @@ positive and consistent with the figures beside them. No timing assertions."""
 import importlib.util
 import json
 import math
+import os
 import platform
 import time
 
@@ -111,6 +112,21 @@ def test_bad_options_are_refused(tmp_path, capsys):
     with pytest.raises(SystemExit):
         main(["--sizes", "huge"])
     assert not list(tmp_path.iterdir())
+
+
+def test_some_sections_go_to_their_own_folder_and_an_out_that_is_a_file_is_refused_first(tmp_path, monkeypatch,
+                                                                                           capsys):
+    """--only without --out writes reports/bench/<sections>: a part never replaces the committed whole bench."""
+    from ddfbench.bench.sizes import SIZES
+
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setitem(SIZES["small"]["grid"], "shape", "no_such_shape")  # fails at once: nothing is timed
+    assert main(["--sizes", "small", "--only", "grid", "--repeats", "1"]) == 1
+    assert sorted(os.listdir(tmp_path / "reports" / "bench")) == ["grid"]
+    assert (tmp_path / "reports" / "bench" / "grid" / "bench-cpu-small.json").is_file()
+    (tmp_path / "afile").write_text("")
+    assert main(["--sizes", "small", "--only", "grid", "--out", str(tmp_path / "afile")]) == 2
+    assert capsys.readouterr().err.endswith(f"ddfbench.bench: --out {tmp_path / 'afile'}: exists and is not a folder\n")
 
 
 def test_a_failing_section_is_reported_and_the_exit_code_says_so(tmp_path, monkeypatch):

@@ -66,6 +66,36 @@ def test_a_line_that_is_not_a_record_is_named_and_left_out(tmp_path, capsys):
     assert err.count(str(path)) == 3 and "line 2: not JSON" in err
 
 
+def test_a_report_from_no_records_or_a_damaged_file_writes_nothing(tmp_path, capsys):
+    """An empty folder, a damaged compact file and an --out that is a file are one line each, and the report folder
+    (here a copy of a committed one) keeps every byte."""
+    committed = tmp_path / "default"
+    shutil.copytree(os.path.join(ROOT, "reports", "default"), committed)
+    before = {p.name: p.read_bytes() for p in committed.iterdir() if p.is_file()}
+    (tmp_path / "empty").mkdir()
+    assert report_main([str(tmp_path / "empty"), "--out", str(committed)]) == 2
+    assert capsys.readouterr().err == f"ddfbench.report: {tmp_path / 'empty'}: no run records: nothing written\n"
+    good = committed / compact.FILE
+    lines = gzip.decompress(good.read_bytes()).decode().splitlines()
+    with gzip.open(good, "wt") as fh:
+        fh.write("\n".join(["not json", *lines[1:]]) + "\n")
+    damaged = good.read_bytes()
+    assert report_main([str(good)]) == 2
+    assert "line 1: not JSON" in capsys.readouterr().err and good.read_bytes() == damaged
+    good.write_bytes(b"plain text")
+    assert report_main([str(good)]) == 2
+    assert capsys.readouterr().err.startswith(f"ddfbench.report: {good}: cannot be read as a compact file (")
+    good.write_bytes(before[compact.FILE])
+    assert report_main([str(good), "--out", str(tmp_path / "empty" / "x")]) == 0  # the file itself reads
+    (tmp_path / "afile").write_text("")
+    assert report_main([str(good), "--out", str(tmp_path / "afile")]) == 2
+    assert "--out" in capsys.readouterr().err
+    assert {p.name: p.read_bytes() for p in committed.iterdir() if p.is_file()} == before
+    assert regenerate_main(["--from-records", "--reports", str(committed)]) == 2  # one report, not the folder above
+    assert "holds one report's records itself" in capsys.readouterr().err
+    assert {p.name: p.read_bytes() for p in committed.iterdir() if p.is_file()} == before
+
+
 def test_a_report_rebuilt_from_its_records_equals_the_written_one(results, tmp_path):
     assert report_main([str(results), "--out", str(tmp_path / "rep"), "--plots", "none"]) == 0
     written = tmp_path / "rep"

@@ -139,7 +139,7 @@ def test_an_out_that_is_a_file_or_cannot_be_made_is_one_line(tmp_path, capsys):
     taken.write_text("not a folder")
     reports = os.path.join(ROOT, "reports")
     assert site.main(["--reports", reports, "--out", str(taken)]) == 2
-    assert capsys.readouterr().err == f"ddfbench.report.site: --out {taken}: is a file, not a folder\n"
+    assert capsys.readouterr().err == f"ddfbench.report.site: --out {taken}: exists and is not a folder\n"
     assert taken.read_text() == "not a folder"
     assert site.main(["--reports", reports, "--out", str(taken / "site")]) == 2  # below a file: cannot be made
     assert capsys.readouterr().err.startswith(f"ddfbench.report.site: --out {taken / 'site'}: cannot be made (")

@@ -263,3 +263,16 @@ def test_the_plan_says_which_experiments_add_sweeps_it_does_not_count(capsys):
     lines = capsys.readouterr().out.splitlines()
     assert lines[1].strip() == "+ the sweeps its report asks for once it has run (not counted)"
     assert lines[2].startswith("default") and lines[3].startswith("total")  # none after default
+
+
+def test_an_empty_only_is_refused_and_a_reader_that_goes_away_gets_no_traceback(capsys):
+    import sys
+
+    assert suite.main(["run", "v1", "--tier", "core", "--only", "", "--dry-run"]) == 2
+    assert capsys.readouterr().err == "ddfbench.suite: --only '': names no experiment\n"
+    proc = subprocess.Popen([sys.executable, "-m", "ddfbench.suite", "status", "v1"], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, cwd=ROOT, text=True)
+    proc.stdout.close()  # `| head -0`: the reader is gone before the first line
+    err = proc.stderr.read()
+    proc.wait(timeout=120)
+    assert "Traceback" not in err and "BrokenPipeError" not in err

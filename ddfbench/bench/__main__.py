@@ -2,7 +2,7 @@
                             [--threads N] [--only sampling,oracle,...] [--out reports/bench]
 
 Runs the sections (see ddfbench.bench), prints the table and writes bench-<device>-<sizes>.md and
-.json into --out. A section that fails is reported as failed (its error in the table and the JSON)
+.json into --out (default reports/bench; with --only, reports/bench/<sections>: reports/bench/crossover). A section that fails is reported as failed (its error in the table and the JSON)
 and the command exits 1 after the others have run.
 """
 
@@ -30,6 +30,7 @@ from ddfbench.bench.table import to_markdown, write
 from ddfbench.core import heap
 from ddfbench.core.errors import InputError, one_line
 from ddfbench.fit.train import resolve_device
+from ddfbench.run.checks import writable_folder
 from ddfbench.run.runs import environment
 
 
@@ -105,7 +106,8 @@ def main(argv: list[str] | None = None) -> int:
                     f"{', '.join(ON_REQUEST)}; on a CPU device also not {', '.join(CUDA_ONLY_BY_DEFAULT)})")
     ap.add_argument("--oracle-backend", default="open3d", choices=("open3d", "warp"),
                     help="the ground truth's backend (warp: every query through Warp, for a machine without open3d)")
-    ap.add_argument("--out", default=os.path.join("reports", "bench"), help="folder for the .md and .json")
+    ap.add_argument("--out", default=None, help="folder for the .md and .json (default: reports/bench; with --only, "
+                    "reports/bench/<its sections>, so that a part never replaces the whole bench)")
     ap.add_argument("--set", action="append", default=[], metavar="SECTION.KEY=VALUE",
                     help="override one size of a section (VALUE in YAML), e.g. race.capacities=false; repeatable")
     args = ap.parse_args(argv)
@@ -117,6 +119,8 @@ def main(argv: list[str] | None = None) -> int:
         if args.repeats < 1 or args.warmup < 0 or args.threads < 0:
             raise InputError(f"--repeats {args.repeats} / --warmup {args.warmup} / --threads {args.threads}: "
                              "need repeats >= 1, warmup >= 0, threads >= 0")
+        out = args.out or os.path.join("reports", "bench", *(["-".join(sections)] if args.only is not None else []))
+        writable_folder(out, "--out ")
     except InputError as err:
         print(f"ddfbench.bench: {err}", file=sys.stderr)
         return 2
@@ -156,7 +160,7 @@ def main(argv: list[str] | None = None) -> int:
         "sections": {name: r.as_dict() for name, r in results.items()},
     }
     print(to_markdown(doc))
-    md, js = write(doc, args.out, report_name(device, args.sizes, args.set))
+    md, js = write(doc, out, report_name(device, args.sizes, args.set))
     print(f"[bench] wrote {md} and {js}", file=sys.stderr)
     return 1 if any(r.error for r in results.values()) else 0
 

@@ -126,7 +126,11 @@ def write_report(source: str, out_dir: str, note: str | None = None,
     depends on the records and options alone, so the report regenerates byte for byte from its compact file.
     draw=False draws no image and links the ones out_dir already holds (a check of the text files).
     Raises MixedCommits when the records come from several code commits (unless allowed)."""
-    records = compact.load_records(source)
+    records = compact.load_records(source, strict=True)
+    if not records:
+        inside = os.path.join(source, compact.FILE)
+        hint = f" (a compact file is read by its path: {inside})" if os.path.isfile(inside) else ""
+        raise InputError(f"{source}: no run records{hint}: nothing written")
     shas = code_commits(records)
     if len(shas) > 1 and not allow_mixed_commits:
         raise MixedCommits(f"{source}: records from {len(shas)} code commits ({', '.join(shas)}); rerun them "
@@ -253,10 +257,13 @@ def main(argv: list[str] | None = None) -> int:
                   file=sys.stderr)
             return 2
     out = args.out or (os.path.dirname(os.path.abspath(args.records)) if is_compact else os.path.join(args.records, "report"))
+    from ddfbench.run.checks import writable_folder  # (it imports the families: torch)
+
     try:
+        writable_folder(out, "--out ")
         print(write_report(args.records, out, note=args.note, kinds=kinds, sweep=args.sweep,
                            allow_mixed_commits=args.allow_mixed_commits))
-    except MixedCommits as exc:
+    except (MixedCommits, InputError) as exc:
         print(f"ddfbench.report: {exc}", file=sys.stderr)
         return 2
     print(f"wrote {out}/report.md, table.md, table.csv, runs.csv, table.tex and plots")

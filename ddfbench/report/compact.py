@@ -26,6 +26,7 @@ import re
 import sys
 from typing import Any, Iterable
 
+from ddfbench.core.errors import InputError, one_line
 from ddfbench.run.runs import RECORD_FILE, SCHEMA_VERSION, find_records, record_problem, write_json_atomic
 
 FILE = "records.jsonl.gz"
@@ -75,27 +76,34 @@ def write_compact(records: list[dict[str, Any]], path: str) -> str:
     return write_jsonl_gz((json.dumps(row, sort_keys=True, allow_nan=False) for row in rows), path)
 
 
-def read_compact(path: str) -> list[dict[str, Any]]:
+def read_compact(path: str, strict: bool = False) -> list[dict[str, Any]]:
     """The records of a compact file, each with `_dir` None (its run folder is not here). A line that is not a
-    run record is left out with one stderr line naming the file and the line."""
+    run record is left out with one stderr line naming the file and the line; with strict it is a one-line
+    InputError (a damaged file that a report written from it would replace). A file gzip cannot read is one."""
     out = []
-    with gzip.open(path, "rt", encoding="utf-8") as fh:
-        for number, line in enumerate(fh, 1):
-            try:
-                rec = json.loads(line)
-                problem = record_problem(rec) if isinstance(rec, dict) else f"a JSON {type(rec).__name__}"
-            except json.JSONDecodeError as exc:
-                problem = f"not JSON ({exc.msg})"
-            if problem:
-                print(f"ddfbench: skipped {path} line {number}: {problem}", file=sys.stderr)
-                continue
-            out.append({**rec, "_dir": None})
+    try:
+        with gzip.open(path, "rt", encoding="utf-8") as fh:
+            for number, line in enumerate(fh, 1):
+                try:
+                    rec = json.loads(line)
+                    problem = record_problem(rec) if isinstance(rec, dict) else f"a JSON {type(rec).__name__}"
+                except json.JSONDecodeError as exc:
+                    problem = f"not JSON ({exc.msg})"
+                if problem and strict:
+                    raise InputError(f"{path} line {number}: {problem}: a damaged compact file (nothing written; "
+                                     "git checkout restores a committed one)")
+                if problem:
+                    print(f"ddfbench: skipped {path} line {number}: {problem}", file=sys.stderr)
+                    continue
+                out.append({**rec, "_dir": None})
+    except (OSError, EOFError, UnicodeDecodeError) as exc:  # not gzip, cut short, not UTF-8
+        raise InputError(f"{path}: cannot be read as a compact file ({one_line(exc)})") from None
     return out
 
 
-def load_records(source: str) -> list[dict[str, Any]]:
-    """The records of a folder of run records (any depth) or of a compact file."""
-    return read_compact(source) if source.endswith(".jsonl.gz") else find_records(source)
+def load_records(source: str, strict: bool = False) -> list[dict[str, Any]]:
+    """The records of a folder of run records (any depth) or of a compact file (read_compact, strict)."""
+    return read_compact(source, strict) if source.endswith(".jsonl.gz") else find_records(source)
 
 
 def restore(path: str, out_dir: str) -> tuple[int, int, int]:

@@ -126,6 +126,10 @@ def differences(committed: str, rebuilt: str, whole: bool = False) -> list[str]:
 def from_records(reports: str, check: bool, readme: str | None = None) -> int:
     """--from-records: rebuild (or, with check, compare) every report below reports that has its records, and the
     verdict table (reports/verdict.md and the block of `readme`, when it has the markers)."""
+    if os.path.isfile(os.path.join(reports, compact.FILE)):  # claims.md and index.md would land in a report
+        print(f"ddfbench.report.regenerate: --reports {reports}: holds one report's records itself; give the folder of "
+              "the reports (reports)", file=sys.stderr)
+        return 2
     folders = reports_with_records(reports)
     remeasured = [f for f in measured.folders(reports) if f not in folders]  # a report's records come first
     studies = [f for f in tune_report.folders(reports) if f not in folders + remeasured]

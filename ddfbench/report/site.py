@@ -28,6 +28,7 @@ import sys
 import numpy as np
 import pandas as pd
 
+from ddfbench.core.errors import InputError
 from ddfbench.report import compact, index
 from ddfbench.report.stats import summarize_values
 from ddfbench.report.tables import per_run
@@ -54,6 +55,8 @@ def runs(reports: str) -> pd.DataFrame:
     for folder, _, files in sorted(os.walk(reports)):
         if compact.FILE in files:
             df = per_run(compact.read_compact(os.path.join(folder, compact.FILE)))
+            if df.empty:  # a compact file without a record: no run to plot
+                continue
             df.insert(0, "report", os.path.relpath(folder, reports))
             # a run that gave no mesh, or one off the shape, is not a method result: its penalty is not plotted
             frames.append(df[(df["status"] == "ok") & ~df["empty"].astype(bool) & ~df["off"].astype(bool)])
@@ -237,18 +240,18 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", required=True, help="folder to write the site into (open its index.html)")
     parser.add_argument("--screenshot", help="also save a PNG of the Pareto page there (headless Chromium, Selenium)")
     args = parser.parse_args(argv)
+    from ddfbench.run.checks import writable_folder  # (it imports the families: torch)
+
     if not os.path.isdir(args.reports):
-        print(f"ddfbench.report.site: --reports {args.reports}: no such folder", file=sys.stderr)
-        return 2
-    if os.path.exists(args.out) and not os.path.isdir(args.out):
-        print(f"ddfbench.report.site: --out {args.out}: is a file, not a folder", file=sys.stderr)
+        what = "is a file, not a folder" if os.path.exists(args.reports) else "no such folder"
+        print(f"ddfbench.report.site: --reports {args.reports}: {what}", file=sys.stderr)
         return 2
     try:
-        os.makedirs(args.out, exist_ok=True)
-    except OSError as exc:
-        print(f"ddfbench.report.site: --out {args.out}: cannot be made ({exc.strerror or exc})", file=sys.stderr)
+        writable_folder(args.out, "--out ")
+        got = write_site(args.reports, args.out)
+    except InputError as exc:
+        print(f"ddfbench.report.site: {exc}", file=sys.stderr)
         return 2
-    got = write_site(args.reports, args.out)
     print(f"wrote {args.out}/index.html: {got['runs']} run points, {got['pages']} report pages, "
           f"{got['galleries']} galleries", flush=True)
     if args.screenshot:

@@ -408,6 +408,19 @@ def status(suite: str) -> int:
     return worst
 
 
+def command(args: argparse.Namespace, overrides: list[str]) -> int:
+    """The exit code of the command args names (status, run or its --dry-run plan)."""
+    if args.command == "status":
+        return status(args.suite)
+    only = [n for n in (args.only or "").split(",") if n] or None
+    if args.only is not None and only is None:
+        raise InputError(f"--only {args.only!r}: names no experiment")
+    if args.dry_run:
+        print_plan(plan(args.suite, args.tier, only=only))
+        return 0
+    return run(args.suite, args.tier, args.results, overrides, args.from_reports, only)
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m ddfbench.suite", description=__doc__.split("\n")[0])
     sub = parser.add_subparsers(dest="command", required=True)
@@ -426,13 +439,9 @@ def main(argv: list[str] | None = None) -> int:
     overrides = argv[argv.index("--") + 1:] if "--" in argv else []  # Hydra overrides for every experiment's command
     args = parser.parse_args(argv[:argv.index("--")] if "--" in argv else argv)
     try:
-        if args.command == "status":
-            return status(args.suite)
-        only = [n for n in (args.only or "").split(",") if n] or None
-        if args.dry_run:
-            print_plan(plan(args.suite, args.tier, only=only))
-            return 0
-        return run(args.suite, args.tier, args.results, overrides, args.from_reports, only)
+        code = command(args, overrides)
+        sys.stdout.flush()  # here, so that a reader gone away is caught below and not at the interpreter's exit
+        return code
     except InputError as exc:
         print(f"ddfbench.suite: {exc}", file=sys.stderr)
         return 2
@@ -440,4 +449,7 @@ def main(argv: list[str] | None = None) -> int:
         print("ddfbench.suite: interrupted; run the same command again to go on (finished runs are skipped)",
               file=sys.stderr)
         return 130
+    except BrokenPipeError:  # the reader went away (`| head`): stop printing, quietly
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 1
 

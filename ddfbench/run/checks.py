@@ -188,12 +188,21 @@ def check_shape_file(cfg: Mapping[str, Any]) -> None:
                          "drop shape.name")
 
 
+def check_modules_named(cfg: Mapping[str, Any]) -> None:
+    """The model's YAML names its family and the sampler's its strategy: the modules that build them."""
+    for section, key, where in (("model", "family", "ddfbench/models"), ("sampling", "strategy", "ddfbench/sampling")):
+        if (cfg.get(section) or {}).get(key) is None:
+            raise InputError(f"{section}.{key}: not set: the {section} YAML names the module that builds it "
+                             f"({key}: <a module of {where}>)")
+
+
 def check_job(cfg: Mapping[str, Any]) -> None:
     """Every check of this module, in the order a user would fix them: names, keys, numbers; then the model's
     keys and types against its YAML (Representation.configure; a family may check more of its values there, the
     DDF does) and the scene's keys and values (render.scene.parse_scene), so that none waits for the fit."""
     safe_name(cfg.get("experiment_name", "single"), "experiment_name")
     check_known_keys(cfg)
+    check_modules_named(cfg)
     check_shape_file(cfg)
     check_flags(cfg)
     check_numbers(cfg)
