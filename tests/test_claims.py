@@ -235,6 +235,8 @@ def test_a_claims_table_without_out_goes_beside_its_records_not_over_the_committ
     assert report_main(["results", "--claims"]) == 0
     assert (tmp_path / "results" / "claims.md").read_text().startswith("# ")
     assert not (tmp_path / "reports" / "claims.md").exists()
+    (tmp_path / "empty").mkdir()  # a folder with no experiment's records: one line, no table of "no records"
+    assert report_main(["empty", "--claims"]) == 2 and not (tmp_path / "empty" / "claims.md").exists()
 
 
 @pytest.mark.parametrize("ratios,verdict", [((0.90, 1.00, 1.05), claims.CONFIRMED), ((0.50, 0.52, 0.48), claims.REFUTED)])

@@ -847,6 +847,9 @@ def write_claims(results_dir: str, out_path: str, carry_from: str | None = None)
     """Evaluate every claim on the records below results_dir; write and return claims.md. With carry_from
     (a previous claims.md), claims without records keep their previous rows (see carry)."""
     records = load(results_dir)
+    if not any(records.values()) and carry_from is None:
+        raise InputError(f"{results_dir}: no records of {', '.join(EXPERIMENTS)} below it (results/<experiment>/...): "
+                         "nothing written")
     rows, codes = evaluate(records), []
     if carry_from is not None:
         try:
