@@ -244,7 +244,7 @@ def check_plain_keys(args: list[str]) -> None:
         elif section in CHECKED_SECTIONS:
             plugins.strict_keys(section, {key.split(".")[0]: value}, dict.fromkeys(known[section]), near=True)
         elif section == "scene":  # the keys every scene preset shares (conf/scene/*.yaml)
-            scene_keys = {k for name in plugins.names("scene") for k in plugins.defaults("scene", name)}
+            scene_keys = {k for name in plugins.names("scene") for k in plugins.defaults("scene", name)} - {"defaults"}
             plugins.strict_keys(section, {key.split(".")[0]: value}, dict.fromkeys(scene_keys), near=True)
 
 

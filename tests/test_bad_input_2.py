@@ -147,12 +147,19 @@ def test_an_out_of_range_value_is_a_failed_record_naming_it(tmp_path, where, val
     assert rec["status"] == "failed" and rec["error"].startswith(named), rec["error"]
 
 
-@pytest.mark.parametrize("section,key", [("model", "family"), ("sampling", "strategy")])
-def test_a_yaml_that_names_no_module_is_one_line_saying_so(tmp_path, section, key):
-    cfg = job(tmp_path)
+@pytest.mark.parametrize("model,section,key", [("mesh", "model", "family"), ("neural_sdf", "sampling", "strategy")])
+def test_a_yaml_that_names_no_module_is_one_line_saying_so(tmp_path, model, section, key):
+    cfg = job(tmp_path, f"model={model}")
     cfg[section] = {k: v for k, v in cfg[section].items() if k != key}
     rec = runner.run(cfg)
     assert rec["status"] == "failed" and rec["error"].startswith(f"{section}.{key}: not set: the {section} YAML names")
+
+
+def test_a_family_that_builds_from_the_mesh_needs_no_sampler(tmp_path):
+    from ddfbench.run.checks import check_job
+
+    cfg = job(tmp_path)  # model=mesh: sample_kind None, the runner draws no samples
+    check_job({k: v for k, v in cfg.items() if k != "sampling"})
 
 
 def test_a_name_beside_a_mesh_file_is_one_line_saying_the_file_names_the_shape(tmp_path):

@@ -91,6 +91,14 @@ def test_a_report_from_no_records_or_a_damaged_file_writes_nothing(tmp_path, cap
     assert report_main([str(good), "--out", str(tmp_path / "afile")]) == 2
     assert "--out" in capsys.readouterr().err
     assert {p.name: p.read_bytes() for p in committed.iterdir() if p.is_file()} == before
+    assert report_main([str(tmp_path / "empty")]) == 2 and not (tmp_path / "empty" / "report").exists()
+    capsys.readouterr()
+    # a sweep that left no record, outside the claims' experiments: one line each, the command goes on to its end
+    (tmp_path / "res" / "smoke").mkdir(parents=True)
+    assert regenerate_main(["--report-only", "--only", "smoke", "--results", str(tmp_path / "res"), "--reports",
+                            str(tmp_path / "rep")]) == 2
+    out = capsys.readouterr()
+    assert "smoke: no report:" in out.err and "claims: not written" in out.out
     assert regenerate_main(["--from-records", "--reports", str(committed)]) == 2  # one report, not the folder above
     assert "holds one report's records itself" in capsys.readouterr().err
     assert {p.name: p.read_bytes() for p in committed.iterdir() if p.is_file()} == before

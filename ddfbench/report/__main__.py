@@ -259,11 +259,14 @@ def main(argv: list[str] | None = None) -> int:
     out = args.out or (os.path.dirname(os.path.abspath(args.records)) if is_compact else os.path.join(args.records, "report"))
     from ddfbench.run.checks import writable_folder  # (it imports the families: torch)
 
+    made = not os.path.exists(out)
     try:
         writable_folder(out, "--out ")
         print(write_report(args.records, out, note=args.note, kinds=kinds, sweep=args.sweep,
                            allow_mixed_commits=args.allow_mixed_commits))
     except (MixedCommits, InputError) as exc:
+        if made and os.path.isdir(out) and not os.listdir(out):  # nothing written: no empty folder left either
+            os.rmdir(out)
         print(f"ddfbench.report: {exc}", file=sys.stderr)
         return 2
     print(f"wrote {out}/report.md, table.md, table.csv, runs.csv, table.tex and plots")

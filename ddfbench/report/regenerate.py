@@ -79,7 +79,7 @@ def regenerate(experiment: str, results: str, reports: str, overrides: list[str]
     else:
         try:
             write_report(os.path.join(results, experiment), out, note=note, sweep=[f"+experiment={experiment}", *overrides])
-        except MixedCommits as exc:  # resumed across a code change: rerun into a fresh --results folder
+        except (MixedCommits, InputError) as exc:  # resumed across a code change, or a sweep that left no record
             print(f"{experiment}: no report: {exc}", file=sys.stderr, flush=True)
             return 2
     if seconds is not None:
@@ -215,8 +215,11 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     codes = [regenerate(e, args.results, args.reports, overrides, args.note, run=not args.report_only)
              for e in experiments]
-    write_claims(args.results, os.path.join(args.reports, "claims.md"))
-    print(f"claims: {os.path.join(args.reports, 'claims.md')}", flush=True)
+    try:
+        write_claims(args.results, os.path.join(args.reports, "claims.md"))
+        print(f"claims: {os.path.join(args.reports, 'claims.md')}", flush=True)
+    except InputError as exc:  # none of the claims' experiments below --results (e.g. --only tune)
+        print(f"claims: not written ({exc})", flush=True)
     return max(codes, default=0)
 
 

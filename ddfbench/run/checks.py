@@ -189,8 +189,13 @@ def check_shape_file(cfg: Mapping[str, Any]) -> None:
 
 
 def check_modules_named(cfg: Mapping[str, Any]) -> None:
-    """The model's YAML names its family and the sampler's its strategy: the modules that build them."""
-    for section, key, where in (("model", "family", "ddfbench/models"), ("sampling", "strategy", "ddfbench/sampling")):
+    """The model's YAML names its family, and, for a family that trains on samples, the sampler's its strategy: the
+    modules that build them."""
+    needs = [("model", "family", "ddfbench/models")]
+    if (cfg.get("model") or {}).get("family") is not None:
+        needs += [("sampling", "strategy", "ddfbench/sampling")] * (
+            load_family(str(cfg["model"]["family"])).sample_kind is not None)
+    for section, key, where in needs:
         if (cfg.get(section) or {}).get(key) is None:
             raise InputError(f"{section}.{key}: not set: the {section} YAML names the module that builds it "
                              f"({key}: <a module of {where}>)")
