@@ -143,3 +143,12 @@ def test_an_out_that_is_a_file_or_cannot_be_made_is_one_line(tmp_path, capsys):
     assert taken.read_text() == "not a folder"
     assert site.main(["--reports", reports, "--out", str(taken / "site")]) == 2  # below a file: cannot be made
     assert capsys.readouterr().err.startswith(f"ddfbench.report.site: --out {taken / 'site'}: cannot be made (")
+
+
+def test_a_report_whose_compact_file_holds_no_record_adds_no_run(tmp_path):
+    """A compact file without a record (an older report of an empty folder) is skipped, not a pandas KeyError."""
+    shutil.copytree(os.path.join(ROOT, "reports", "default"), tmp_path / "reports" / "default")
+    (tmp_path / "reports" / "empty").mkdir()
+    compact.write_compact([], str(tmp_path / "reports" / "empty" / compact.FILE))
+    df = site.runs(str(tmp_path / "reports"))
+    assert set(df["report"]) == {"default"} and len(df) > 0
