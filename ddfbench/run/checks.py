@@ -150,8 +150,8 @@ def check_numbers(cfg: Mapping[str, Any]) -> None:
     for key in POINT_COUNTS:
         need, have = _get(cfg, key) * BYTES_A_POINT, physical_memory()
         if need > have:
-            raise InputError(f"{key}={_get(cfg, key)}: needs about {BYTES_A_POINT} bytes a point ({need / 1e9:.3g} GB), "
-                             f"more than this machine's {have / 1e9:.3g} GB of memory")
+            raise InputError(f"{key}={_get(cfg, key)}: needs about {BYTES_A_POINT} bytes a point "
+                             f"({need / 1e9:.3g} GB), more than this machine's {have / 1e9:.3g} GB of memory")
     if cfg["train"]["max_epochs"] is not None:
         _number(cfg["train"]["max_epochs"], "train.max_epochs", lambda x: x > 0, "a finite number > 0 or null")
     _number(cfg["train"]["max_seconds"], "train.max_seconds", lambda x: x > 0, "a finite number of seconds > 0")
@@ -192,9 +192,9 @@ def check_modules_named(cfg: Mapping[str, Any]) -> None:
     """The model's YAML names its family, and, for a family that trains on samples, the sampler's its strategy: the
     modules that build them."""
     needs = [("model", "family", "ddfbench/models")]
-    if (cfg.get("model") or {}).get("family") is not None:
-        needs += [("sampling", "strategy", "ddfbench/sampling")] * (
-            load_family(str(cfg["model"]["family"])).sample_kind is not None)
+    family = (cfg.get("model") or {}).get("family")
+    if family is not None and load_family(str(family)).sample_kind is not None:
+        needs.append(("sampling", "strategy", "ddfbench/sampling"))
     for section, key, where in needs:
         if (cfg.get(section) or {}).get(key) is None:
             raise InputError(f"{section}.{key}: not set: the {section} YAML names the module that builds it "

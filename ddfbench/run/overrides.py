@@ -12,7 +12,7 @@ import difflib
 import os
 
 from hydra.core.override_parser.overrides_parser import OverridesParser
-from hydra.core.override_parser.types import ValueType
+from hydra.core.override_parser.types import Override, ValueType
 from hydra.errors import HydraException
 
 from ddfbench.core.errors import InputError, first_line
@@ -28,14 +28,14 @@ def is_override(arg: str) -> bool:
     return "=" in arg and not arg.startswith("-")
 
 
-def parsed(arg: str):
+def parsed(arg: str) -> Override:
     """The override as Hydra reads it; a one-line InputError where it cannot."""
     try:
         (override,) = OverridesParser.create().parse_overrides([arg])
     except HydraException as exc:
         key, _, value = arg.partition("=")
-        raise InputError(f"{arg}: Hydra cannot read this value ({first_line(exc)}); a value with ( ) [ ] {{ }} , = ' \" or "
-                         f"spaces needs quotes: \"{key}='{value}'\"") from None
+        raise InputError(f"{arg}: Hydra cannot read this value ({first_line(exc)}); a value with ( ) [ ] {{ }} , = ' "
+                         f"\" or spaces needs quotes: \"{key}='{value}'\"") from None
     return override
 
 
