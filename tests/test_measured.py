@@ -129,3 +129,17 @@ def test_numpy_scalars_are_written_as_numbers_and_other_objects_refused_leaving_
     with pytest.raises(TypeError, match="object is not a measured value"):
         measured.write(str(tmp_path / "bad"), HEAD, [{**edge_rows()[0], "pixels": object()}])
     assert not os.listdir(tmp_path / "bad")  # no half-written rows
+
+
+def test_part_of_a_measurement_does_not_replace_a_whole_one(tmp_path, capsys):
+    """With an unreadable run, a folder that holds a measurement keeps it (one line); a new folder gets the rows
+    measured (exit 1 either way)."""
+    folder = tmp_path / "m"
+    measured.write(str(folder), HEAD, edge_rows())
+    before = {p.name: p.read_bytes() for p in folder.iterdir()}
+    assert measured.publish("edge_error", str(folder), HEAD, edge_rows()[:2], failed=1) == 1
+    assert "1 run(s) unreadable" in capsys.readouterr().err
+    assert {p.name: p.read_bytes() for p in folder.iterdir()} == before
+    assert measured.publish("edge_error", str(tmp_path / "new"), HEAD, edge_rows()[:2], failed=1) == 1
+    assert (tmp_path / "new" / measured.FILE).is_file()
+    assert measured.publish("edge_error", str(folder), HEAD, edge_rows(), failed=0) == 0  # a whole one replaces

@@ -104,6 +104,25 @@ def test_a_report_from_no_records_or_a_damaged_file_writes_nothing(tmp_path, cap
     assert {p.name: p.read_bytes() for p in committed.iterdir() if p.is_file()} == before
 
 
+def test_a_report_that_fails_midway_leaves_its_folder_as_it_was(tmp_path, capsys, monkeypatch):
+    """A run's artifact that cannot be drawn (a reconstruction.ply cut short) fails the gallery after the tables
+    are made: one line, and the report folder keeps every byte (the tables were written to a scratch folder)."""
+    import ddfbench.report.__main__ as report_cli
+
+    committed = tmp_path / "default"
+    shutil.copytree(os.path.join(ROOT, "reports", "default"), committed)
+    before = {p.name: p.read_bytes() for p in committed.iterdir() if p.is_file()}
+
+    def cut_short(records, out_dir):
+        raise ValueError("PLY is unexpected length!")
+
+    monkeypatch.setattr(report_cli, "write_gallery", cut_short)
+    assert report_main([str(committed / compact.FILE), "--note", "changed"]) == 2
+    assert capsys.readouterr().err == "ddfbench.report: ValueError: PLY is unexpected length!: nothing written\n"
+    assert {p.name: p.read_bytes() for p in committed.iterdir() if p.is_file()} == before
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".report-")]  # no scratch folder left
+
+
 def test_a_report_rebuilt_from_its_records_equals_the_written_one(results, tmp_path):
     assert report_main([str(results), "--out", str(tmp_path / "rep"), "--plots", "none"]) == 0
     written = tmp_path / "rep"

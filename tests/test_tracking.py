@@ -113,3 +113,26 @@ def test_failed_record_is_logged_as_failed(tmp_path):
     assert log_record(uri, record, str(tmp_path / "r")) is not None
     found, _ = _runs(uri, "e")
     assert found[0].info.status == "FAILED" and found[0].data.tags["error"].startswith("fit of x failed")
+
+
+def test_a_run_whose_artifact_is_gone_is_one_line_and_logged_whole_once_it_is_back(tmp_path, capsys):
+    """A missing reconstruction.ply stops the backfill with one line; the run logged in part is removed, so that the
+    next backfill (the file restored) logs it whole instead of counting it as already there."""
+    from ddfbench.report.export_mlflow import main as export_main
+
+    rec = runner.run(_cfg(tmp_path, "model=mesh", "model.faces=0", "scene=none"))
+    ply = tmp_path / "single" / rec["key"] / rec["artifacts"]["reconstruction"]
+    kept = ply.read_bytes()
+    ply.unlink()
+    uri = default_uri(str(tmp_path / "elsewhere"))
+    os.makedirs(tmp_path / "elsewhere")
+    assert export_main([str(tmp_path / "single"), "--uri", uri]) == 2
+    err = [line for line in capsys.readouterr().err.splitlines() if " INFO " not in line]  # mlflow's own log lines
+    assert len(err) == 1 and err[0].startswith(f"export_mlflow: {uri}: run ") and "not logged (FileNotFoundError" in err[0]
+    assert _runs(uri)[0] == []
+    ply.write_bytes(kept)
+    assert export(str(tmp_path / "single"), uri) == (1, 0)
+    (run,), _ = _runs(uri)
+    assert run.info.status == "FINISHED"
+    assert export_main([str(tmp_path / "single"), "--uri", "bogus://x"]) == 2  # a store MLflow does not know
+    assert "export_mlflow: bogus://x: run " in capsys.readouterr().err

@@ -33,13 +33,15 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import shutil
 import sys
+import tempfile
 from collections import Counter
 from typing import Any
 
 import pandas as pd
 
-from ddfbench.core.errors import InputError
+from ddfbench.core.errors import InputError, one_line
 from ddfbench.report import compact, convergence, finalists, shape_suite
 from ddfbench.report.gallery import CAPTION, GALLERY, write_gallery
 from ddfbench.report.paired import paired_report
@@ -262,15 +264,36 @@ def main(argv: list[str] | None = None) -> int:
     made = not os.path.exists(out)
     try:
         writable_folder(out, "--out ")
-        print(write_report(args.records, out, note=args.note, kinds=kinds, sweep=args.sweep,
-                           allow_mixed_commits=args.allow_mixed_commits))
-    except (MixedCommits, InputError) as exc:
-        if made and os.path.isdir(out) and not os.listdir(out):  # nothing written: no empty folder left either
+        print(write_report_whole(args.records, out, note=args.note, kinds=kinds, sweep=args.sweep,
+                                 allow_mixed_commits=args.allow_mixed_commits))
+    except Exception as exc:  # a bad input, or a run's artifact that cannot be drawn: one line, nothing written
+        if made and os.path.isdir(out) and not os.listdir(out):  # no empty folder left either
             os.rmdir(out)
-        print(f"ddfbench.report: {exc}", file=sys.stderr)
+        message = str(exc) if isinstance(exc, (MixedCommits, InputError)) else one_line(exc)
+        print(f"ddfbench.report: {message}" + ("" if message.endswith("nothing written") else ": nothing written"),
+              file=sys.stderr)
         return 2
     print(f"wrote {out}/report.md, table.md, table.csv, runs.csv, table.tex and plots")
     return 0
+
+
+def write_report_whole(source: str, out_dir: str, **options: Any) -> str:
+    """write_report into a scratch folder beside out_dir (holding out_dir's files, which it may link), then every file
+    it wrote into out_dir: a report that fails midway (an artifact that cannot be read) leaves out_dir as it was. The
+    compact file a report is rebuilt from is not written over."""
+    scratch = tempfile.mkdtemp(prefix=".report-", dir=os.path.dirname(os.path.abspath(out_dir)))
+    try:
+        for name in os.listdir(out_dir):
+            if os.path.isfile(os.path.join(out_dir, name)):
+                shutil.copy2(os.path.join(out_dir, name), scratch)
+        md = write_report(source, scratch, **options)
+        if os.path.abspath(source) == os.path.abspath(os.path.join(out_dir, compact.FILE)):
+            os.remove(os.path.join(scratch, compact.FILE))
+        for name in os.listdir(scratch):
+            os.replace(os.path.join(scratch, name), os.path.join(out_dir, name))
+        return md
+    finally:
+        shutil.rmtree(scratch, ignore_errors=True)
 
 
 if __name__ == "__main__":

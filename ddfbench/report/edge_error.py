@@ -41,6 +41,7 @@ from ddfbench.report.records import no_result
 from ddfbench.report.reevaluate import artifact, finished_records, unreadable
 from ddfbench.report.stats import summarize_values, within_range
 from ddfbench.report.tables import NOT_CONVERGED
+from ddfbench.run.checks import writable_folder
 
 BANDS = (("edge", 0.0), ("near", 2.0), ("mid", 4.0), ("far", math.inf))  # name, largest distance (px)
 NEAR = ("edge", "near")  # the bands within 2 px of an edge
@@ -195,6 +196,7 @@ def main(argv: list[str] | None = None) -> int:
         if not args.jump > 0:
             raise InputError(f"--jump {args.jump}: must be > 0 (unit-cube units)")
         recs = finished_records(args.results, args.model)
+        writable_folder(args.out, "--out ")
     except InputError as err:
         print(f"ddfbench.report.edge_error: {err}", file=sys.stderr)
         return 2
@@ -216,9 +218,7 @@ def main(argv: list[str] | None = None) -> int:
         return 1
     head = measured.header("edge_error", argv, f"{len(used)} runs' saved renders ({failed} unreadable), edges at "
                            f"depth steps > {args.jump:g}", used, args.results)
-    md = measured.write(args.out, head, rows)
-    print(md, end="")
-    return 1 if failed else 0
+    return measured.publish("edge_error", args.out, head, rows, failed)
 
 
 if __name__ == "__main__":

@@ -13,19 +13,26 @@ import argparse
 import os
 import sys
 
+from ddfbench.core.errors import InputError, one_line
 from ddfbench.run.runs import find_records
 from ddfbench.run.tracking import default_uri, log_record
 
 
 def export(records_dir: str, uri: str) -> tuple[int, int]:
-    """Log every record below records_dir to uri; return (logged, already there)."""
+    """Log every record below records_dir to uri; return (logged, already there). The first record that cannot be
+    logged (a missing artifact, a store that refuses the URI) is a one-line InputError naming it; the runs logged
+    before it stay, and the next export logs the rest."""
     logged = present = 0
     for record in find_records(records_dir):
         run_dir = record.pop("_dir")
-        if log_record(uri, record, run_dir) is None:
-            present += 1
-        else:
-            logged += 1
+        try:
+            run_id = log_record(uri, record, run_dir)
+        except ImportError:
+            raise
+        except Exception as exc:
+            raise InputError(f"{uri}: run {run_dir} not logged ({one_line(exc)}); {logged} logged before it, "
+                             f"{present} already there") from None
+        logged, present = logged + (run_id is not None), present + (run_id is None)
     return logged, present
 
 
@@ -42,6 +49,9 @@ def main(argv: list[str] | None = None) -> int:
         logged, present = export(args.records_dir, uri)
     except ImportError:
         print('export_mlflow: mlflow is not installed (pip install -e ".[tracking]")', file=sys.stderr)
+        return 2
+    except InputError as exc:
+        print(f"export_mlflow: {exc}", file=sys.stderr)
         return 2
     print(f"{uri}: {logged} runs logged, {present} already there")
     return 0

@@ -71,6 +71,17 @@ def write(out: str, head: dict[str, str], rows: list[dict[str, Any]]) -> str:
     return rebuild(out, out)
 
 
+def publish(tool: str, out: str, head: dict[str, str], rows: list[dict[str, Any]], failed: int) -> int:
+    """write() and print table.md, unless a run was unreadable and `out` holds a measurement already (a committed
+    one is not replaced by part of one: one line instead); the tool's exit code (1 when a run was unreadable)."""
+    if failed and os.path.isfile(os.path.join(out, FILE)):
+        print(f"ddfbench.report.{tool}: {failed} run(s) unreadable: {out} holds a measurement and is kept as it was "
+              "(write the rows measured now to a new --out)", file=sys.stderr)
+        return 1
+    print(write(out, head, rows), end="")
+    return 1 if failed else 0
+
+
 def read(folder: str) -> tuple[dict[str, str], list[dict[str, Any]]]:
     """The header and rows a re-measurement folder holds; InputError naming the file (and line) that is not one."""
     path = os.path.join(folder, META)

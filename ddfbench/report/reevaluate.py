@@ -28,6 +28,7 @@ import copy
 import os
 import sys
 import tempfile
+import zipfile
 from typing import Any
 
 import torch
@@ -40,6 +41,7 @@ from ddfbench.core.representation import Representation
 from ddfbench.evaluate.metrics import geometry_metrics
 from ddfbench.models import load_family
 from ddfbench.report import measured, paired, tables
+from ddfbench.run.checks import writable_folder
 from ddfbench.run.runs import find_records
 
 RECORD_SCENE = "record"  # --scene record: each run's own scene as its record gives it
@@ -212,6 +214,7 @@ def main(argv: list[str] | None = None) -> int:
         scene = (plugins.plugin_yaml("scene", args.scene) if args.scene and args.scene != RECORD_SCENE
                  else args.scene)
         recs = finished_records(args.results, args.model)
+        writable_folder(args.out, "--out ")
     except InputError as err:
         print(f"ddfbench.report.reevaluate: {err}", file=sys.stderr)
         return 2
@@ -223,7 +226,7 @@ def main(argv: list[str] | None = None) -> int:
             done.append(again)
             if pair is not None:
                 saved.append(pair)
-        except (InputError, OSError, KeyError, ValueError) as err:
+        except (InputError, OSError, KeyError, ValueError, zipfile.BadZipFile) as err:
             failed += 1
             unreadable("reevaluate", rec, err)
             continue
@@ -232,7 +235,7 @@ def main(argv: list[str] | None = None) -> int:
     if done:
         head = measured.header("reevaluate", argv, f"{len(done)} runs measured again ({failed} unreadable)", done,
                               args.results)
-        print(measured.write(args.out, head, done + saved), end="")
+        return measured.publish("reevaluate", args.out, head, done + saved, failed)
     return 1 if failed else 0
 
 

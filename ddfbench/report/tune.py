@@ -1,6 +1,6 @@
 """`python -m ddfbench.report.tune RESULTS/tune --out reports/tune`: the tuning studies (`+experiment=tune`).
 
-Writes into --out, from the records alone:
+Writes into --out (default: RESULTS/tune/report, beside the records), from the records alone:
   trials.csv, trials.md  every trial per model in the order run: the values drawn, the objective
                          (chamfer L2 x10^3 of the final reconstruction; empty: the penalty), steps, fit s;
                          a tune record with no drawn values is the preset itself at the same budget
@@ -37,6 +37,7 @@ from ddfbench.evaluate.metric_registry import objective_value
 from ddfbench.fit.tune import search_space
 from ddfbench.report.checked_json import checked_json_object
 from ddfbench.report.compact import folders_holding
+from ddfbench.run.checks import writable_folder
 from ddfbench.run.runs import code_commits, find_records
 
 OBJECTIVE = "chamfer_l2"  # conf/experiment/tune.yaml `objective`
@@ -271,11 +272,14 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m ddfbench.report.tune", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("records", help="the tune records, e.g. results/tune")
-    parser.add_argument("--out", default="reports/tune")
+    parser.add_argument("--out", help="folder for the tables (default: beside the records, RECORDS/report; "
+                        "--out reports/tune to publish)")
     args = parser.parse_args(argv)
+    out = args.out or os.path.join(args.records, "report")
     try:
-        df = write(args.records, args.out)
-    except FileNotFoundError as err:
+        writable_folder(out, "--out ")
+        df = write(args.records, out)
+    except (FileNotFoundError, InputError) as err:
         print(f"ddfbench.report.tune: {err}", file=sys.stderr)
         return 2
     for model, group in df[df["kind"] == "trial"].groupby("model"):

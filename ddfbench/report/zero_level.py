@@ -31,6 +31,7 @@ from __future__ import annotations
 import math
 import os
 import sys
+import zipfile
 from typing import Any
 
 import numpy as np
@@ -51,6 +52,7 @@ from ddfbench.report.reevaluate import (
     saved_model,
     unreadable,
 )
+from ddfbench.run.checks import writable_folder
 
 PERCENTILES = (5, 25, 50, 75, 95)
 GRAD_BATCH = 1024  # points per backward pass (the GAN generator's graph is ~35k floats a point)
@@ -157,6 +159,7 @@ def main(argv: list[str] | None = None) -> int:
         sdf_recs = [r for r in recs if issubclass(load_family(str(r["family"])), SDFFamily)]
         if not sdf_recs:
             raise InputError(f"{args.results}: none of its {len(recs)} finished runs is of an SDF family")
+        writable_folder(args.out, "--out ")
     except InputError as err:
         print(f"ddfbench.report.zero_level: {err}", file=sys.stderr)
         return 2
@@ -164,7 +167,7 @@ def main(argv: list[str] | None = None) -> int:
     for rec in sorted(sdf_recs, key=_table_order):
         try:
             rows.append(zero_level_row(rec, args.n_points))
-        except (InputError, OSError, KeyError, ValueError, RuntimeError) as err:
+        except (InputError, OSError, KeyError, ValueError, RuntimeError, zipfile.BadZipFile) as err:
             failed += 1
             unreadable("zero_level", rec, err)
     if rows:
@@ -172,7 +175,7 @@ def main(argv: list[str] | None = None) -> int:
         other = len(recs) - len(sdf_recs)
         head = measured.header("zero_level", argv, f"{len(rows)} SDF runs ({failed} unreadable, {other} of other "
                                "families left out)", used, args.results)
-        print(measured.write(args.out, head, rows), end="")
+        return measured.publish("zero_level", args.out, head, rows, failed)
     return 1 if failed else 0
 
 

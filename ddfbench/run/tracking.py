@@ -163,17 +163,21 @@ def log_record(uri: str, record: Mapping[str, Any], run_dir: str) -> str | None:
         return None
     run = client.create_run(experiment_id, start_time=_epoch_ms(record.get("started")), tags=record_tags(record))
     run_id = run.info.run_id
-    params = [Param(_name(k), str(v)[:6000]) for k, v in flatten(record.get("config", {}))]
-    for i in range(0, len(params), _BATCH):
-        client.log_batch(run_id, params=params[i:i + _BATCH])
-    now = run.info.start_time
-    metrics = [Metric(k, v, now, 0) for k, v in record_metrics(record).items()]
-    metrics += [Metric(k, v, now + fit_ms, index) for k, v, index, fit_ms in _probe_history(record)]
-    for i in range(0, len(metrics), 1000):
-        client.log_batch(run_id, metrics=metrics[i:i + 1000])
-    _artifacts(client, run_id, run_dir, record)
-    client.set_terminated(run_id, status="FINISHED" if record.get("status") == "ok" else "FAILED",
-                          end_time=_epoch_ms(record.get("finished")))
+    try:
+        params = [Param(_name(k), str(v)[:6000]) for k, v in flatten(record.get("config", {}))]
+        for i in range(0, len(params), _BATCH):
+            client.log_batch(run_id, params=params[i:i + _BATCH])
+        now = run.info.start_time
+        metrics = [Metric(k, v, now, 0) for k, v in record_metrics(record).items()]
+        metrics += [Metric(k, v, now + fit_ms, index) for k, v, index, fit_ms in _probe_history(record)]
+        for i in range(0, len(metrics), 1000):
+            client.log_batch(run_id, metrics=metrics[i:i + 1000])
+        _artifacts(client, run_id, run_dir, record)
+        client.set_terminated(run_id, status="FINISHED" if record.get("status") == "ok" else "FAILED",
+                              end_time=_epoch_ms(record.get("finished")))
+    except BaseException:  # a run logged in part is not "already there": it goes, and the next export logs it whole
+        client.delete_run(run_id)
+        raise
     return run_id
 
 
