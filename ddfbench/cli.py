@@ -286,6 +286,24 @@ def check_extras(args: list[str]) -> None:
                              f"(pip install -e \".[{EXTRA_OF_EXPERIMENT[name][1]}]\")")
 
 
+def check_tune(args: list[str]) -> None:
+    """+experiment=tune studies one model: a one-line InputError when the command names none, or one whose YAML
+    declares no search space (the Optuna sweeper would end in a traceback)."""
+    if not any(a.lstrip("+") == "experiment=tune" for a in args):
+        return
+    from ddfbench.core.errors import InputError
+    from ddfbench.fit.tune import EXPERIMENT, search_space
+
+    models = [a.split("=", 1)[1] for a in args if a.lstrip("+").startswith("model=")]
+    studied = ", ".join(plugins.members("model", EXPERIMENT))
+    if len(models) != 1 or "," in models[0]:
+        raise InputError(f"+experiment={EXPERIMENT}: name one model to study (model=<name>; models with a search "
+                         f"space: {studied})")
+    if models[0] in plugins.names("model") and not search_space(models[0]):
+        raise InputError(f"model={models[0]}: conf/model/{models[0]}.yaml declares no experiments.{EXPERIMENT} search "
+                         f"space (models that do: {studied})")
+
+
 def check_out_dir(args: list[str]) -> None:
     """A one-line InputError, before Hydra writes its own files there, when the out_dir the command names (the
     last `out_dir=`, else conf/config.yaml's `results`) is not a folder that can be made and written."""
@@ -383,6 +401,7 @@ def main() -> None:
         check_out_dir(sys.argv[1:])
         check_plain_keys(sys.argv[1:])
         check_overrides(sys.argv[1:], sweeps=sweeps(sys.argv[1:]))
+        check_tune(sys.argv[1:])
         sys.argv[1:] = checked_overrides(sys.argv[1:])
     except InputError as err:
         print(f"ddfbench: {err}", file=sys.stderr)

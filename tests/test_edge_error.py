@@ -140,3 +140,15 @@ def test_the_table_pools_seeds_and_says_where_fewer_runs_define_a_figure():
     assert cells[3] == "2"  # n: the runs of the row
     assert cells[4] == "50 ± 0 [50, 50]"  # two identical runs: no spread
     assert cells[4 + [key for key, _, _ in COLUMNS].index("depth_mae_far")] == "2 (n = 1)"
+
+
+def test_a_run_with_a_cameras_renders_lost_is_named_not_measured_in_part(tmp_path):
+    from ddfbench.core.errors import InputError
+    from ddfbench.report.edge_error import run_counts
+
+    (tmp_path / "renders").mkdir()
+    for name in ("cam0_depth_reference.npy", "cam0_depth.npy"):
+        (tmp_path / "renders" / name).write_bytes(b"")
+    rec = {"_dir": str(tmp_path), "artifacts": {"renders": "renders"}, "config": {"scene": {"cameras": {"n": 2}}}}
+    with pytest.raises(InputError, match=r"renders: depth renders of 1 of the scene's 2 cameras$"):
+        run_counts(rec, 0.05)

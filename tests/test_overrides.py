@@ -57,3 +57,13 @@ def test_globs_interpolations_and_other_config_folders_are_left_to_hydra():
 def test_hydra_mode_run_is_not_a_sweep_unless_m_is_given():
     assert not cli.sweeps(["+experiment=default", "hydra.mode=RUN", "seed=0,1"])
     assert cli.sweeps(["+experiment=default", "hydra.mode=RUN", "-m"])
+
+
+def test_a_tuning_study_names_one_model_with_a_search_space():
+    with pytest.raises(InputError, match=r"^\+experiment=tune: name one model to study \(model=<name>; models with a "
+                                         r"search space: .*ddf"):
+        cli.check_tune(["+experiment=tune"])
+    with pytest.raises(InputError, match=r"^model=mesh: conf/model/mesh.yaml declares no experiments.tune search"):
+        cli.check_tune(["+experiment=tune", "model=mesh"])
+    cli.check_tune(["+experiment=tune", "model=ddf"])
+    cli.check_tune(["model=mesh"])  # not a study

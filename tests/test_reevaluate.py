@@ -109,3 +109,16 @@ def test_a_float16_run_measures_its_rounded_network_as_store_as_float16_measures
     assert main([str(tmp_path / "single"), "--out", str(tmp_path / "w"), "--model", "ddf", "--store-as", "float32"]) == 1
     err = [line for line in capsys.readouterr().err.splitlines() if line.startswith("ddfbench.report.reevaluate")]
     assert len(err) == 1 and runs["float16"]["_dir"] in err[0] and "stored as float16 already" in err[0]
+
+
+def test_a_scene_preset_is_composed_with_the_presets_it_builds_on():
+    """normals.yaml says `defaults: [depth, _self_]`: read as a job reads it, it has depth's cameras and its own
+    outputs (read as a plain YAML it had a `defaults` key every render refused)."""
+    from ddfbench.core.errors import InputError
+    from ddfbench.report.reevaluate import scene_config
+
+    normals = scene_config("normals")
+    assert "defaults" not in normals and normals["outputs"] == ["depth", "mask", "normal"]
+    assert normals["cameras"] == scene_config("depth")["cameras"]
+    with pytest.raises(InputError, match="scene=fancy: no conf/scene/fancy.yaml"):
+        scene_config("fancy")

@@ -101,6 +101,9 @@ def run_counts(rec: dict[str, Any], jump: float) -> dict[str, np.ndarray]:
                      if name.startswith("cam") and name.endswith("_depth_reference.npy"))
     if not cameras:
         raise InputError(f"{folder}: no cam<c>_depth_reference.npy (the run's scene saved no depth renders)")
+    asked = ((((rec.get("config") or {}).get("scene") or {}).get("cameras") or {}).get("n"))
+    if isinstance(asked, int) and len(cameras) < asked:  # a camera's renders lost: its run is not measured in part
+        raise InputError(f"{folder}: depth renders of {len(cameras)} of the scene's {asked} cameras")
     total = {k: np.zeros(len(BANDS)) for k in COUNTS}
     for c in cameras:
         for k, v in band_counts(*_frame(folder, c, False), *_frame(folder, c, True), jump).items():

@@ -134,6 +134,18 @@ def unreadable(tool: str, rec: dict[str, Any], err: Exception) -> None:
     print(f"ddfbench.report.{tool}: {rec['_dir']}: {type(err).__name__}: {why}", file=sys.stderr, flush=True)
 
 
+def scene_config(name: str) -> dict[str, Any]:
+    """conf/scene/<name>.yaml as a job sees it: composed by Hydra, so a preset's `defaults` (normals: depth's
+    cameras) are merged in; an InputError naming the presets where there is no such file."""
+    from hydra import compose, initialize_config_dir
+    from omegaconf import OmegaConf
+
+    plugins.plugin_yaml("scene", name)  # a missing preset: one line naming the others
+    with initialize_config_dir(plugins.CONF_DIR, version_base="1.3"):
+        cfg = compose("config", overrides=[f"scene={name}"])
+    return OmegaConf.to_container(cfg.scene, resolve=True)
+
+
 def reevaluated(rec: dict[str, Any], n_points: int, scene: dict[str, Any] | str | None,
                 store_as: str | None = None) -> dict[str, Any]:
     """A copy of the record whose metrics are measured again: geometry at n_points (the record's radii,
@@ -211,8 +223,7 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     try:
         checked_counts(args)
-        scene = (plugins.plugin_yaml("scene", args.scene) if args.scene and args.scene != RECORD_SCENE
-                 else args.scene)
+        scene = scene_config(args.scene) if args.scene and args.scene != RECORD_SCENE else args.scene
         recs = finished_records(args.results, args.model)
         writable_folder(args.out, "--out ")
     except InputError as err:

@@ -76,6 +76,9 @@ def record_row(rec: dict[str, Any]) -> dict[str, Any]:
         "shape": (rec.get("shape") or {}).get("name"), "seed": (rec.get("config") or {}).get("seed"),
         "empty": empty_mesh(rec), "off": off_shape(rec), "started": str(rec.get("started") or ""),
         "budget": budget_label(rec),
+        # the points a surface its sampled metrics were measured on (a re-measurement's own), else its config's
+        "_points": (rec.get("metrics") or {}).get("n_points") or ((rec.get("config") or {}).get("eval") or {}).get(
+            "n_points"),
     }
     for metric in metric_registry.METRICS:
         row[metric.name] = metric.read(rec)
@@ -120,8 +123,8 @@ def summarize(records: Iterable[dict[str, Any]]) -> pd.DataFrame:
     """One row per configuration (seeds pooled).
 
     Columns: model, shape, one per varying override key (its value, None where a record lacks it),
-    budget (steps | epochs | wall-clock), eval_points (points a surface of the sampled metrics), n (ok runs),
-    n_failed, n_expected (runs of the fullest row), n_empty (ok runs whose reconstruction
+    budget (steps | epochs | wall-clock), eval_points (points a surface the sampled metrics were measured on), n (ok
+    runs), n_failed, n_expected (runs of the fullest row), n_empty (ok runs whose reconstruction
     was empty: their metrics are the defined penalty), n_off (ok runs off the shape, `off_shape`), not_converged
     (every ok run empty or off the shape: not a method result, not ranked), errors, keys (record hashes),
     <metric>_mean, <metric>_std, <metric>_ci_lo, <metric>_ci_hi (t interval over seeds),
@@ -154,7 +157,7 @@ def summarize(records: Iterable[dict[str, Any]]) -> pd.DataFrame:
         for k in labels:
             entry[k] = members[0]["_labels"].get(k)
         entry["budget"] = members[0]["budget"]
-        entry["eval_points"] = members[0]["_config"].get("eval.n_points")  # a config key: one value per row
+        entry["eval_points"] = max((m["_points"] for m in members if m["_points"]), default=None)
         entry["n"] = len(ok)
         entry["n_failed"] = len(members) - len(ok)
         entry["n_expected"] = n_expected
