@@ -9,7 +9,7 @@ SCENE = {"outputs": ["depth"], "width": 32, "height": 24, "cameras": {"n": 1, "r
                                                  "fov_deg": 40.0}}
 
 
-def test_mesh_view_lights_the_mesh_and_leaves_the_rest_background(tmp_path):
+def test_mesh_view_lights_the_mesh_and_leaves_the_rest_background(tmp_path, capsys):
     path = str(tmp_path / "box.ply")
     trimesh.creation.box(extents=(0.5, 0.5, 0.5)).export(path)
     image = shaded_mesh_view(path, SCENE)
@@ -18,6 +18,7 @@ def test_mesh_view_lights_the_mesh_and_leaves_the_rest_background(tmp_path):
     assert not background[12, 16] and background[0, 0] and background[23, 31]  # box in the middle only
     assert 0.1 < (~background).mean() < 0.6
     assert np.all(shaded_mesh_view(str(tmp_path / "missing.ply"), SCENE) == _BACKGROUND)
+    assert capsys.readouterr().err == f"ddfbench.report: {tmp_path / 'missing.ply'}: missing; its gallery panel is left blank\n"
 
 
 def test_no_renders_no_gallery(tmp_path):

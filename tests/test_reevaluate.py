@@ -122,3 +122,15 @@ def test_a_scene_preset_is_composed_with_the_presets_it_builds_on():
     assert normals["cameras"] == scene_config("depth")["cameras"]
     with pytest.raises(InputError, match="scene=fancy: no conf/scene/fancy.yaml"):
         scene_config("fancy")
+
+
+def test_a_bad_count_names_the_flag_given_and_the_tool_s_own_command(tmp_path, capsys):
+    from ddfbench.report.zero_level import main as zero_level_main
+
+    assert zero_level_main([str(tmp_path), "--out", str(tmp_path / "z"), "--n-points", "0"]) == 2
+    assert capsys.readouterr().err == "ddfbench.report.zero_level: --n-points 0: must be an integer >= 1\n"
+    assert main([str(tmp_path), "--out", str(tmp_path / "r"), "--threads", "-1"]) == 2
+    assert capsys.readouterr().err == "ddfbench.report.reevaluate: --threads -1: must be an integer >= 0 (0: torch's default)\n"
+    with pytest.raises(SystemExit):
+        main(["--help"])
+    assert capsys.readouterr().out.startswith("usage: python -m ddfbench.report.reevaluate")

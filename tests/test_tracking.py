@@ -136,3 +136,6 @@ def test_a_run_whose_artifact_is_gone_is_one_line_and_logged_whole_once_it_is_ba
     assert run.info.status == "FINISHED"
     assert export_main([str(tmp_path / "single"), "--uri", "bogus://x"]) == 2  # a store MLflow does not know
     assert "export_mlflow: bogus://x: run " in capsys.readouterr().err
+    (tmp_path / "none").mkdir()
+    assert export_main([str(tmp_path / "none"), "--uri", uri]) == 2
+    assert capsys.readouterr().err.endswith(f"export_mlflow: {tmp_path / 'none'}: no run records below it\n")

@@ -53,6 +53,9 @@ def main(argv: list[str] | None = None) -> int:
     except InputError as exc:
         print(f"export_mlflow: {exc}", file=sys.stderr)
         return 2
+    if not logged + present:
+        print(f"export_mlflow: {args.records_dir}: no run records below it", file=sys.stderr)
+        return 2
     print(f"{uri}: {logged} runs logged, {present} already there")
     return 0
 

@@ -12,6 +12,7 @@ title; CAPTION, what a cell shows, goes into the report beside it.
 from __future__ import annotations
 
 import os
+import sys
 from typing import Any
 
 import numpy as np
@@ -52,6 +53,8 @@ def shaded_mesh_view(mesh_path: str | None, scene_cfg: dict[str, Any]) -> np.nda
 
     camera = parse_scene(scene_cfg).cameras[0]
     image = np.broadcast_to(_BACKGROUND, (camera.height, camera.width, 3)).copy()
+    if mesh_path and not os.path.isfile(mesh_path):  # named by its record but gone: its panel is blank, said so
+        print(f"ddfbench.report: {mesh_path}: missing; its gallery panel is left blank", file=sys.stderr)
     mesh = trimesh.load(mesh_path, process=False) if mesh_path and os.path.isfile(mesh_path) else None
     if mesh is None or len(getattr(mesh, "faces", [])) == 0:
         return image

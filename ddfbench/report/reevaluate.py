@@ -103,7 +103,7 @@ def _image_metrics(rec: dict[str, Any], rep: Representation, gt: trimesh.Trimesh
 def records_parser(tool: str, description: str, out_files: str, n_points: int) -> argparse.ArgumentParser:
     """The arguments every tool that measures an experiment's finished records takes again: the records
     folder, --out, --n-points (surface points per mesh), --model and --threads."""
-    ap = argparse.ArgumentParser(prog=f"python -m ddfbench.{tool}", description=description)
+    ap = argparse.ArgumentParser(prog=f"python -m ddfbench.report.{tool}", description=description)
     ap.add_argument("results", help="an experiment's records folder (results/<experiment>)")
     ap.add_argument("--out", required=True, help=f"folder for {out_files}")
     ap.add_argument("--n-points", type=int, default=n_points, help=f"surface points per mesh (default {n_points})")
@@ -114,8 +114,10 @@ def records_parser(tool: str, description: str, out_files: str, n_points: int) -
 
 def checked_counts(args: argparse.Namespace) -> None:
     """InputError unless --n-points >= 1 and --threads >= 0; sets torch's threads when --threads is given."""
-    if args.n_points < 1 or args.threads < 0:
-        raise InputError(f"--n-points {args.n_points} / --threads {args.threads}: need n-points >= 1, threads >= 0")
+    if args.n_points < 1:
+        raise InputError(f"--n-points {args.n_points}: must be an integer >= 1")
+    if args.threads < 0:
+        raise InputError(f"--threads {args.threads}: must be an integer >= 0 (0: torch's default)")
     if args.threads:
         torch.set_num_threads(args.threads)
 
