@@ -285,3 +285,12 @@ def test_every_experiment_has_a_quick_form_with_one_seed_and_a_step_budget():
             cfg = compose("config", overrides=[f"+experiment={name}", "+form=quick"], return_hydra_config=True)
         assert (cfg.train.budget, cfg.train.max_steps, cfg.eval.n_points) == ("steps", 200, 10000), name
         assert str(cfg.hydra.sweeper.params.get("seed", "0")) == "0", name
+
+
+def test_status_refuses_what_the_runner_refuses(capsys):
+    """`report --status +train.max_step=5` said every run was missing; the runner would run none of them."""
+    from ddfbench.report import status
+
+    assert status.main("/nonexistent/default", ["+experiment=default", "+train.max_step=5"]) == 2
+    assert capsys.readouterr().err.startswith("ddfbench.report --status: train.max_step: unknown key (did you mean "
+                                              "max_steps")

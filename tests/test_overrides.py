@@ -67,3 +67,4 @@ def test_a_tuning_study_names_one_model_with_a_search_space():
         cli.check_tune(["+experiment=tune", "model=mesh"])
     cli.check_tune(["+experiment=tune", "model=ddf"])
     cli.check_tune(["model=mesh"])  # not a study
+

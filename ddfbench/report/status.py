@@ -110,6 +110,8 @@ def expected_grid(records_dir: str, overrides: list[str]) -> tuple[list[Job], st
     from hydra import initialize_config_dir
     from hydra.core.global_hydra import GlobalHydra
 
+    from ddfbench.run.checks import check_job  # (it imports the families: torch)
+
     with initialize_config_dir(CONF_DIR, version_base="1.3", job_name="ddfbench_status"):
         loader = GlobalHydra.instance().config_loader()
         master, source = _master_config(loader, records_dir, overrides)
@@ -118,8 +120,10 @@ def expected_grid(records_dir: str, overrides: list[str]) -> tuple[list[Job], st
         swept, expanded = sweep_jobs(loader, master, list(master.hydra.overrides.task))
         jobs = []
         for job_overrides in expanded:
-            key = runs.config_key(compose_job(loader, master, job_overrides)[0])
-            jobs.append(Job([o for o in job_overrides if o.split("=", 1)[0] in swept], key))
+            cfg = compose_job(loader, master, job_overrides)[0]
+            if not jobs:  # the runner's checks, once: an override it refuses (+train.max_step=5) runs no job
+                check_job(cfg)
+            jobs.append(Job([o for o in job_overrides if o.split("=", 1)[0] in swept], runs.config_key(cfg)))
     return jobs, source
 
 
