@@ -8,10 +8,10 @@ else of its model, else any committed record of the same model, else unknown; a 
 a fixed-work job's fit time is scaled to its own steps or epochs); `run` runs each experiment (Hydra resumes finished
 jobs and prints a progress line per job with an ETA), then the sweeps its report asks for (FOLLOW_UPS: the tuning
 protocol's confirmation on fresh seeds, from the records), then writes its report (over the committed one only when no
-job failed); with --from-reports it first
-restores the reports' committed records into the results folder, so that a tier resumes across machines. `status` says,
-per report, the code commit its records come from and whether the code or config of a model it ran changed since
-(stale), by `git diff` (the modules that write nothing into a record, RESULT_NEUTRAL, left out).
+job failed); with --from-reports it first restores the reports' committed records into the results folder, so that a
+tier resumes across machines. `status` says, per report, the code commit its records come from and whether the code or
+config of a model it ran changed since (stale), by `git diff` (the modules that write nothing into a record,
+RESULT_NEUTRAL, left out).
 """
 
 from __future__ import annotations
@@ -260,10 +260,10 @@ def run(suite: str, tier: str, results: str, extra: list[str] | None = None, fro
         only: list[str] | None = None) -> int:
     """Run every experiment of the tier into results/ (resuming) with the suite's overrides and then `extra` (e.g. a
     launcher, threads), then the sweeps its records ask for (FOLLOW_UPS), then write its report (write_report: into
-    the committed folder only when none of them had a failed job); the worst exit code. from_reports: first restore each report's
-    committed records into results/ (compact.restore), so that a tier cut short on another machine goes on where
-    its committed records end (the report refuses records of two code commits: run it from the records' commit).
-    only: the tier's experiments to run (default: all)."""
+    the committed folder only when none of them had a failed job); the worst exit code. from_reports: first restore
+    each report's committed records into results/ (compact.restore), so that a tier cut short on another machine goes
+    on where its committed records end (the report refuses records of two code commits: run it from the records'
+    commit). only: the tier's experiments to run (default: all)."""
     from ddfbench.run.checks import writable_folder
 
     entries = tier_entries(suite, tier, only)
