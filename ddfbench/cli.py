@@ -393,9 +393,11 @@ def short_openmp_spin() -> None:
 def main() -> None:
     """Entry point. Without `model=` or `+experiment=`, run `+experiment=default` with the given overrides."""
     from ddfbench.core.errors import InputError
+    from ddfbench.run.checks import check_conf_found
 
     short_openmp_spin()  # first: the checks below import torch
     try:
+        check_conf_found()
         check_extras(sys.argv[1:])
         check_threads(sys.argv[1:])
         check_out_dir(sys.argv[1:])

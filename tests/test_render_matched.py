@@ -89,6 +89,21 @@ def test_the_command_reads_committed_compact_records_and_writes_only_with_out(tm
     assert matched.main([str(tmp_path / "none.jsonl.gz")]) == 2
 
 
+def test_no_run_to_match_or_a_bad_out_is_one_line_and_nothing_written(tmp_path, capsys):
+    (tmp_path / "empty").mkdir()
+    assert matched.main([str(tmp_path / "empty"), "--out", str(tmp_path / "out")]) == 2
+    assert capsys.readouterr().err == (f"ddfbench.report.matched: {tmp_path / 'empty'}: no finished ddf_tuned run "
+                                       "beside another family's on its shape and frame size: nothing written\n")
+    assert not (tmp_path / "out").exists()
+    from ddfbench.report import compact
+
+    compact.write_compact([{**r, "key": f"k{i}", "experiment": "render_time"} for i, r in enumerate(records(5e-3))],
+                          str(tmp_path / "rt.jsonl.gz"))
+    (tmp_path / "file").write_text("")
+    assert matched.main([str(tmp_path / "rt.jsonl.gz"), "--out", str(tmp_path / "file")]) == 2
+    assert capsys.readouterr().err.endswith("exists and is not a folder: nothing written\n")
+
+
 @pytest.mark.slow
 def test_render_matched_grid_sweeps_tracer_settings_of_the_sdf_families():
     from ddfbench.report.status import expected_grid

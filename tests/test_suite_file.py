@@ -265,6 +265,22 @@ def test_the_plan_says_which_experiments_add_sweeps_it_does_not_count(capsys):
     assert lines[2].startswith("default") and lines[3].startswith("total")  # none after default
 
 
+def test_the_suite_refuses_a_tree_that_is_not_a_git_checkout(monkeypatch, tmp_path, capsys):
+    monkeypatch.setattr(suite, "ROOT", str(tmp_path))  # a wheel's site-packages: reports/ there is no one's
+    assert suite.main(["run", "v1", "--tier", "core", "--dry-run"]) == 2
+    assert capsys.readouterr().err == (f"ddfbench.suite: {tmp_path}: not the top of a git checkout of ddfbench; the "
+                                       "suite reads and writes the committed reports/ of one (git clone the "
+                                       "repository, then pip install -e . in it)\n")
+
+
+def test_records_that_name_no_code_commit_are_unknown_not_current(monkeypatch, capsys):
+    monkeypatch.setattr(suite, "committed_records", lambda _: {
+        "reports/default": [{"env": {"code_sha": None}, "family": "mesh", "model": "mesh"}]})
+    assert suite.status("v1") == 1
+    line = next(x for x in capsys.readouterr().out.splitlines() if " reports/default " in x)
+    assert line.split()[3:] == ["unknown", "records", "that", "name", "no", "code", "commit"]
+
+
 def test_an_empty_only_is_refused_and_a_reader_that_goes_away_gets_no_traceback(capsys):
     import sys
 

@@ -231,6 +231,14 @@ def main(argv: list[str] | None = None) -> int:
         parser.error("the folder of run records is required, e.g. results/ablation")
     if args.carry and not args.claims:
         parser.error("--carry goes with --claims")
+    if not args.claims:  # a report and a sweep's status compose the experiment's configs
+        from ddfbench.run.checks import check_conf_found  # (it imports the families: torch)
+
+        try:
+            check_conf_found()
+        except InputError as exc:
+            print(f"ddfbench.report: {exc}", file=sys.stderr)
+            return 2
     if args.status is not None:
         from ddfbench.report import status
 
@@ -259,7 +267,7 @@ def main(argv: list[str] | None = None) -> int:
                   file=sys.stderr)
             return 2
     out = args.out or (os.path.dirname(os.path.abspath(args.records)) if is_compact else os.path.join(args.records, "report"))
-    from ddfbench.run.checks import writable_folder  # (it imports the families: torch)
+    from ddfbench.run.checks import writable_folder
 
     made = not os.path.exists(out)
     try:

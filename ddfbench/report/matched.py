@@ -23,6 +23,7 @@ from typing import Any, Iterable
 
 import pandas as pd
 
+from ddfbench.core.errors import InputError
 from ddfbench.report import compact
 from ddfbench.report.stats import summarize_values
 from ddfbench.report.tables import override_labels
@@ -143,15 +144,37 @@ def main(argv: list[str] | None = None) -> int:
         print(f"ddfbench.report.matched: {', '.join(missing)}: no folder of run records or .jsonl.gz file",
               file=sys.stderr)
         return 2
-    df = matched_table([r for source in args.records for r in compact.load_records(source)])
-    md = to_markdown(df)
-    if args.out:
-        os.makedirs(args.out, exist_ok=True)
-        with open(os.path.join(args.out, "matched.md"), "w") as fh:
-            fh.write(md)
-        df.to_csv(os.path.join(args.out, "matched.csv"), index=False)
+    try:
+        df = matched_table([r for source in args.records for r in compact.load_records(source, strict=True)])
+        if df.empty:
+            raise InputError(f"{', '.join(args.records)}: no finished {REFERENCE} run beside another family's on its "
+                             "shape and frame size")
+        md = to_markdown(df)
+        if args.out:
+            from ddfbench.run.checks import writable_folder  # (it imports the families: torch)
+
+            writable_folder(args.out, "--out ")
+            write_both(args.out, md, df)
+    except InputError as exc:
+        print(f"ddfbench.report.matched: {exc}: nothing written", file=sys.stderr)
+        return 2
     print(md)
     return 0
+
+
+def write_both(out: str, md: str, df: pd.DataFrame) -> None:
+    """out/matched.md and out/matched.csv, each through a temporary file renamed over it once both are written."""
+    done = {os.path.join(out, "matched.md"): md, os.path.join(out, "matched.csv"): df.to_csv(index=False)}
+    try:
+        for path, text in done.items():
+            with open(f"{path}.tmp", "w") as fh:
+                fh.write(text)
+        for path in done:
+            os.replace(f"{path}.tmp", path)
+    finally:
+        for path in done:
+            if os.path.exists(f"{path}.tmp"):
+                os.unlink(f"{path}.tmp")
 
 
 if __name__ == "__main__":

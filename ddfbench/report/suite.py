@@ -35,6 +35,7 @@ from ddfbench.core.plugins import CONF_DIR
 from ddfbench.report import compact, finalists
 from ddfbench.report.status import compose_job, sweep_jobs
 from ddfbench.run import runs
+from ddfbench.run.checks import check_conf_found
 
 ROOT = os.path.dirname(CONF_DIR)
 # experiment: its records -> the overrides of each sweep its report still needs (run into the same out_dir)
@@ -353,10 +354,11 @@ RESULT_NEUTRAL = ("ddfbench/run/checks.py", "ddfbench/run/overrides.py", "ddfben
 
 def stale(entry: Entry, records: list[dict[str, Any]]) -> tuple[str, list[str]]:
     """(the records' code commit(s), files of the models' families and configs changed or removed since the oldest
-    one; a file added since is not a change to the code that ran)."""
+    one; a file added since is not a change to the code that ran). ("", []) where no record names its code commit
+    (records run outside a git checkout)."""
     shas = sorted({str((r.get("env") or {}).get("code_sha")) for r in records if (r.get("env") or {}).get("code_sha")})
     if not shas:
-        return "no records", []
+        return "", []
     paths = {"ddfbench/core", "ddfbench/truth", "ddfbench/sampling", "ddfbench/evaluate", "ddfbench/fit",
              "ddfbench/render", "ddfbench/run", f"conf/experiment/{entry.experiment}.yaml"}
     paths |= {os.path.relpath(os.path.join(root, f), ROOT) for root, _, files in os.walk(os.path.join(ROOT, "ddfbench",
@@ -393,23 +395,36 @@ def _only_membership_changed(sha: str, path: str) -> bool:
 
 
 def status(suite: str) -> int:
-    """Print each report of the suite with its records' commit and whether it is stale; 1 when any is."""
+    """Print each report of the suite with its records' commit and whether it is stale; 1 when any is stale or
+    unknown."""
     records = committed_records(os.path.join(ROOT, "reports"))
     worst = 0
     for tier, entries in load_suite(suite).items():
         for entry in entries:
             recs = records.get(entry.report, [])
             commits, changed = stale(entry, recs) if recs else ("", [])
-            state = "stale" if changed else ("unknown" if not recs else "current")
+            state = "stale" if changed else ("current" if commits else "unknown")
             worst = max(worst, 1 if state != "current" else 0)
             print(f"{tier:<5} {entry.experiment:<16} {entry.report:<28} {state:<8} "
-                  + (f"records of {commits}" if recs else "no records committed")
+                  + (f"records of {commits}" if commits else
+                     "records that name no code commit" if recs else "no records committed")
                   + (f"; changed since: {', '.join(changed[:4])}{' ...' if len(changed) > 4 else ''}" if changed else ""))
     return worst
 
 
+def check_checkout() -> None:
+    """The suite plans from, judges and writes the committed reports/ of a git checkout of ddfbench (ROOT): a one-line
+    InputError where ROOT is not the top of one (a wheel installed into site-packages)."""
+    check_conf_found()
+    top = subprocess.run(["git", "-C", ROOT, "rev-parse", "--show-toplevel"], capture_output=True, text=True)
+    if top.returncode != 0 or os.path.realpath(top.stdout.strip()) != os.path.realpath(ROOT):
+        raise InputError(f"{ROOT}: not the top of a git checkout of ddfbench; the suite reads and writes the "
+                         "committed reports/ of one (git clone the repository, then pip install -e . in it)")
+
+
 def command(args: argparse.Namespace, overrides: list[str]) -> int:
     """The exit code of the command args names (status, run or its --dry-run plan)."""
+    check_checkout()
     if args.command == "status":
         return status(args.suite)
     only = [n for n in (args.only or "").split(",") if n] or None

@@ -53,6 +53,14 @@ def writable_folder(path: str, named: str) -> None:
         raise InputError(f"{named}{path}: cannot be written")
 
 
+def check_conf_found() -> None:
+    """ddfbench reads its Hydra configs from conf/ beside the package, where a source checkout has them (`pip
+    install -e .`); a one-line InputError where they are not (a wheel installed elsewhere carries none)."""
+    if not os.path.isfile(os.path.join(plugins.CONF_DIR, "config.yaml")):
+        raise InputError(f"{plugins.CONF_DIR}: no configs there: ddfbench runs from a source checkout, whose conf/ "
+                         "lies beside the package (git clone the repository, then pip install -e . in it)")
+
+
 @functools.lru_cache(maxsize=None)
 def declared_values() -> dict[str, dict[str, tuple[Any, ...]]]:
     """{"": top-level keys, "train" / "eval" / "oracle": their keys} -> every value a YAML gives the key: what
