@@ -88,7 +88,12 @@ class SweepTableCallback(Callback):
 
         sweeper = config.hydra.sweeper
         total = count_jobs(list(config.hydra.overrides.task), sweeper.get("params"), sweeper.get("n_trials"))
-        start_sweep(str(config.hydra.sweep.dir), total)
+        try:
+            start_sweep(str(config.hydra.sweep.dir), total)
+        except OSError as err:  # a full or read-only disk, before any job
+            print(f"ddfbench: {err.filename or config.hydra.sweep.dir}: cannot be written ({err.strerror or err}); "
+                  "nothing ran", file=sys.stderr)
+            sys.exit(1)
         if config.get("quiet", False) or os.environ.get("CI"):  # CI logs: only the progress lines
             for launcher_log in ("hydra", "hydra_plugins"):
                 logging.getLogger(launcher_log).setLevel(logging.WARNING)

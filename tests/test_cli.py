@@ -86,6 +86,17 @@ def test_sweep_goes_on_after_a_failure_and_report_renders(tmp_path):
     assert "mesh_lod500" in md and "failed" in md.lower()
     assert (tmp_path / "rep" / "table.tex").read_text().startswith("\\begin{tabular}")
     assert "chamfer_l2_mean" in (tmp_path / "rep" / "table.csv").read_text()
+    # Hydra keeps no file of its own per job (a full disk would stop the sweep there): the records hold the configs
+    jobs = [p for p in (tmp_path / ".hydra" / "sweep").glob("*/*") if p.is_dir()]
+    assert len(jobs) == 4 and not [p for job in jobs for p in job.iterdir() if p.name != "ddfbench_key.txt"]
+
+
+def test_a_sweep_whose_folder_cannot_be_made_stops_in_one_line_before_any_job(tmp_path):
+    (tmp_path / ".hydra").write_text("")  # where the sweep's own folder goes: as unwritable as a full disk
+    out = ddfbench(["--multirun", *SMALL, "seed=0,1", "experiment_name=sweep"], tmp_path)
+    assert out.returncode == 1 and not (tmp_path / "sweep").exists()
+    assert out.stderr.strip().splitlines()[-1].startswith(f"ddfbench: {tmp_path / '.hydra'}")
+    assert out.stderr.strip().endswith("cannot be written (Not a directory); nothing ran") and "Traceback" not in out.stderr
 
 
 def without_shape(args):
