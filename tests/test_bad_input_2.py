@@ -125,6 +125,48 @@ def test_a_record_that_is_not_one_is_rerun_and_skipped_by_the_report(tmp_path, c
     assert runner.run(cfg)["status"] == "ok" and is_done(path)  # the next launch runs it
 
 
+# ---- forced reruns -----------------------------------------------------------------------------------
+def test_a_force_that_is_not_true_or_false_stops_before_the_ok_record_is_touched(tmp_path):
+    cfg = job(tmp_path)
+    path = runs.record_path(str(tmp_path / "out"), "single", config_key(cfg))
+    assert runner.run(cfg)["status"] == "ok"
+    before = open(path).read()
+    with pytest.raises(InputError, match=r"^force='maybe': must be true or false$"):
+        runner.run({**cfg, "force": "maybe"})
+    assert open(path).read() == before and is_done(path)
+
+
+def test_a_forced_rerun_killed_midway_leaves_no_record_that_vouches_for_its_files(tmp_path, monkeypatch):
+    cfg = job(tmp_path)
+    path = runs.record_path(str(tmp_path / "out"), "single", config_key(cfg))
+    assert runner.run(cfg)["status"] == "ok"
+
+    def killed(cfg, rdir, *args):  # the new fit's artifact is written, then the process dies
+        open(os.path.join(rdir, "reconstruction.ply"), "w").close()
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(runner, "_stages", killed)
+    with pytest.raises(KeyboardInterrupt):
+        runner.run({**cfg, "force": True})
+    assert not os.path.exists(path)  # the old ok record is gone: the next launch runs the key again
+    monkeypatch.undo()
+    assert runner.run(cfg)["status"] == "ok" and is_done(path)
+
+
+def test_an_earlier_attempt_s_error_log_does_not_stay_beside_the_ok_record(tmp_path, monkeypatch):
+    cfg = job(tmp_path)
+
+    def broken(*args):
+        raise RuntimeError("a stage broke")
+
+    monkeypatch.setattr(runner, "_stages", broken)
+    failed = runner.run(cfg)
+    log = os.path.join(tmp_path / "out", "single", failed["key"], runner.ERROR_LOG)
+    assert failed["error"] == "RuntimeError: a stage broke" and "a stage broke" in open(log).read()
+    monkeypatch.undo()
+    assert runner.run(cfg)["status"] == "ok" and not os.path.exists(log)  # the failed key runs again
+
+
 # ---- unchecked values -------------------------------------------------------------------------------
 @pytest.mark.parametrize("where,value,named", [
     ("domain", 0.0, "domain=0.0"), ("domain", -1, "domain=-1"), ("oracle.occupancy_rays", 0, "oracle.occupancy_rays=0"),
@@ -134,7 +176,7 @@ def test_a_record_that_is_not_one_is_rerun_and_skipped_by_the_report(tmp_path, c
     ("seed", 2**63, "seed=9223372036854775808: must be an integer >= 0 and < 2**63"),
     ("eval.n_points", 10**12, "eval.n_points=1000000000000: needs about 600 bytes a point (6e+05 GB), more than this "
      "machine's"),
-    ("force", "maybe", "force='maybe': must be true or false"), ("quiet", "loud", "quiet='loud': must be true or false"),
+    ("quiet", "loud", "quiet='loud': must be true or false"),
     ("eval.noise_floor", 2, "eval.noise_floor=2: must be true or false")])
 def test_an_out_of_range_value_is_a_failed_record_naming_it(tmp_path, where, value, named):
     cfg = job(tmp_path)

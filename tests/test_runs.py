@@ -3,6 +3,8 @@
 import json
 import os
 
+import pytest
+
 from ddfbench.run import runs
 
 
@@ -115,3 +117,36 @@ def test_find_records_names_each_file_that_is_not_a_record(tmp_path, capsys):
         (line,) = [ln for ln in lines if str(tmp_path / name / "record.json") in ln]
         assert why in line
     assert runs.read_record(str(tmp_path / "list" / "record.json")) is None  # a rerun writes it anew
+
+
+def test_find_records_keeps_one_record_a_key_and_leaves_out_another_schema(tmp_path, capsys):
+    """A copied run folder is not a second seed, and a record the sweep would rerun is not counted as done."""
+    for folder in ("a", "copy_of_a"):
+        runs.write_json_atomic(str(tmp_path / folder / "record.json"), record("ok", key="k"))
+    runs.write_json_atomic(str(tmp_path / "old" / "record.json"),
+                           record("ok", key="o", schema_version=runs.SCHEMA_VERSION - 1))
+    assert [r["_dir"] for r in runs.find_records(str(tmp_path))] == [str(tmp_path / "a")]
+    err = capsys.readouterr().err
+    assert f"skipped {tmp_path / 'copy_of_a' / 'record.json'}: a second record of run " in err
+    assert f"(the first: {tmp_path / 'a' / 'record.json'})" in err
+    assert (f"skipped {tmp_path / 'old' / 'record.json'}: schema_version {runs.SCHEMA_VERSION - 1}, not "
+            f"{runs.SCHEMA_VERSION} (a sweep runs it again)") in err
+
+
+def test_a_writer_that_fails_midway_leaves_the_old_file_and_no_temporary(tmp_path):
+    from ddfbench.core.atomic import write_atomic
+
+    path = tmp_path / "data.bin"
+    path.write_bytes(b"old")
+
+    def half(fh):
+        fh.write(b"new, cut")
+        raise OSError(28, "No space left on device")
+
+    with pytest.raises(OSError, match="No space left"):
+        write_atomic(str(path), half, "wb")
+    assert path.read_bytes() == b"old" and os.listdir(tmp_path) == ["data.bin"]
+    assert write_atomic(str(path), lambda fh: fh.write(b"new"), "wb") == str(path) and path.read_bytes() == b"new"
+    mask = os.umask(0)
+    os.umask(mask)
+    assert oct(os.stat(path).st_mode & 0o777) == oct(0o666 & ~mask)  # not mkstemp's 0600

@@ -201,6 +201,20 @@ def test_cache_reuses_the_dataset(sphere, tmp_path):
     assert loaded.meta["strategy"] == "random" and len(loaded) == 1000
 
 
+@pytest.mark.parametrize("damage", ["cut", "garbled", "empty"])
+def test_a_cached_dataset_that_cannot_be_read_is_built_anew_and_named(sphere, tmp_path, damage, caplog):
+    cfg = config("random", n_samples=1000)
+    first, path, _ = build(sphere, Oracle(sphere.mesh), cfg, "rays", 3, str(tmp_path))
+    data = open(path, "rb").read()
+    with open(path, "wb") as fh:  # a crash or a full disk cut it short; another writer garbled it
+        fh.write({"cut": data[:len(data) // 2], "garbled": b"x" * len(data), "empty": b""}[damage])
+    again, path2, info = build(sphere, Oracle(sphere.mesh), cfg, "rays", 3, str(tmp_path))
+    assert path2 == path and not info["cache_hit"] and np.array_equal(again.t, first.t)
+    assert f"{path}: not a readable dataset" in caplog.text
+    assert build(sphere, Oracle(sphere.mesh), cfg, "rays", 3, str(tmp_path))[2]["cache_hit"]  # whole again
+    assert sorted(os.listdir(tmp_path)) == [os.path.basename(path)]  # no temporary file left
+
+
 @pytest.mark.parametrize("key,value", [("s_fc", 0), ("s_dr", 2.5), ("s_p", -1), ("s_fc", True), ("steps", "spiral"),
                                        ("t_min", 0), ("face_mode", "some"),
                                        ("sdf_uniform", 1.0), ("sdf_uniform", -0.1), ("sdf_uniform", "half")])

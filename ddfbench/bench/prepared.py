@@ -20,6 +20,7 @@ from typing import Any, Callable, TypeVar
 import numpy as np
 import trimesh
 
+from ddfbench.core.atomic import write_atomic
 from ddfbench.core.errors import InputError
 from ddfbench.core.representation import Representation
 
@@ -73,15 +74,11 @@ def mesh(sizes: dict, name: str, spec: dict[str, Any], make: Callable[[], trimes
         with np.load(path) as z:
             return trimesh.Trimesh(z["vertices"], z["faces"], process=False)
     out = make()
-    tmp = f"{path}.tmp{os.getpid()}.npz"
-    np.savez(tmp, vertices=np.asarray(out.vertices, np.float64), faces=np.asarray(out.faces, np.int64))
-    os.replace(tmp, path)
+    write_atomic(path, lambda fh: np.savez(fh, vertices=np.asarray(out.vertices, np.float64),
+                                           faces=np.asarray(out.faces, np.int64)), "wb")
     return out
 
 
 def _write_json(path: str, doc: dict) -> None:
     """Written whole or not at all (a stopped process leaves no half file that a later one would trust)."""
-    tmp = f"{path}.tmp{os.getpid()}"
-    with open(tmp, "w") as fh:
-        json.dump(doc, fh, indent=1, default=str)
-    os.replace(tmp, path)
+    write_atomic(path, lambda fh: json.dump(doc, fh, indent=1, default=str))

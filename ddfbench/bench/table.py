@@ -7,6 +7,8 @@ import math
 import os
 from typing import Any
 
+from ddfbench.core.atomic import write_atomic
+
 
 def number(v: float) -> str:
     """A figure for a table: 3 significant digits, or exponent notation below 1e-3."""
@@ -48,14 +50,9 @@ def to_markdown(doc: dict[str, Any]) -> str:
 
 
 def write(doc: dict[str, Any], out_dir: str, stem: str) -> tuple[str, str]:
-    """Write <stem>.md and <stem>.json into out_dir (each by a temporary file and a rename)."""
+    """Write <stem>.md and <stem>.json into out_dir (each whole or not at all: core.atomic)."""
     os.makedirs(out_dir, exist_ok=True)
     paths = []
     for ext, text in (("md", to_markdown(doc)), ("json", json.dumps(doc, indent=1, allow_nan=True) + "\n")):
-        path = os.path.join(out_dir, f"{stem}.{ext}")
-        tmp = f"{path}.tmp{os.getpid()}"
-        with open(tmp, "w") as fh:
-            fh.write(text)
-        os.replace(tmp, path)
-        paths.append(path)
+        paths.append(write_atomic(os.path.join(out_dir, f"{stem}.{ext}"), lambda fh, text=text: fh.write(text)))
     return paths[0], paths[1]

@@ -35,6 +35,8 @@ from typing import Any, Mapping
 import numpy as np
 import torch
 
+from ddfbench.core.atomic import write_atomic
+
 log = logging.getLogger(__name__)
 
 FILE = "fit_checkpoint.pt"
@@ -51,18 +53,11 @@ class Checkpoint:
 
     def save(self, state: Mapping[str, Any]) -> None:
         """Write `state` with this checkpoint's tag: a temporary file of this process, synced, then an atomic
-        rename. A failure is logged, not raised: the fit goes on without that save."""
-        tmp = f"{self.path}.{os.getpid()}.tmp"
+        rename (core.atomic). A failure is logged, not raised: the fit goes on without that save."""
         try:
-            with open(tmp, "wb") as fh:
-                torch.save({"format": FORMAT, "tag": self.tag, **state}, fh)
-                fh.flush()
-                os.fsync(fh.fileno())
-            os.replace(tmp, self.path)
+            write_atomic(self.path, lambda fh: torch.save({"format": FORMAT, "tag": self.tag, **state}, fh), "wb")
         except Exception as exc:  # a full disk, or a family's state that cannot be serialized
             log.warning("%s: checkpoint not saved (%s); the fit goes on", self.path, exc)
-            if os.path.exists(tmp):
-                os.remove(tmp)
 
     def load(self, fit: str) -> dict[str, Any] | None:
         """The saved state of fit `fit` (the loop's label of what is trained), or None: no file, one that

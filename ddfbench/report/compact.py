@@ -24,8 +24,9 @@ import json
 import os
 import re
 import sys
-from typing import Any, Iterable
+from typing import IO, Any, Iterable
 
+from ddfbench.core.atomic import write_atomic
 from ddfbench.core.errors import InputError, one_line
 from ddfbench.run.runs import RECORD_FILE, SCHEMA_VERSION, find_records, record_problem, write_json_atomic
 
@@ -54,19 +55,15 @@ def folders_holding(root: str, *names: str) -> list[str]:
 
 
 def write_jsonl_gz(lines: Iterable[str], path: str) -> str:
-    """Write the lines (JSON texts) to path, one a line, gzip'd with timestamp 0 (one content, one file), through a
-    temporary file renamed over path (a failure leaves no half-written file); return path."""
-    tmp = f"{path}.tmp"
-    try:
-        with open(tmp, "wb") as raw, gzip.GzipFile(filename="", mode="wb", fileobj=raw, mtime=0) as fh:
+    """Write the lines (JSON texts) to path, one a line, gzip'd with timestamp 0 (one content, one file), whole or
+    not at all (core.atomic); return path."""
+
+    def write(raw: IO[bytes]) -> None:
+        with gzip.GzipFile(filename="", mode="wb", fileobj=raw, mtime=0) as fh:
             for line in lines:
                 fh.write((line + "\n").encode())
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
-    return path
+
+    return write_atomic(path, write, "wb")
 
 
 def write_compact(records: list[dict[str, Any]], path: str) -> str:

@@ -23,6 +23,7 @@ from typing import Any, Iterable
 
 import pandas as pd
 
+from ddfbench.core.atomic import write_atomic
 from ddfbench.core.errors import InputError
 from ddfbench.report import compact
 from ddfbench.report.stats import summarize_values
@@ -163,18 +164,9 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def write_both(out: str, md: str, df: pd.DataFrame) -> None:
-    """out/matched.md and out/matched.csv, each through a temporary file renamed over it once both are written."""
-    done = {os.path.join(out, "matched.md"): md, os.path.join(out, "matched.csv"): df.to_csv(index=False)}
-    try:
-        for path, text in done.items():
-            with open(f"{path}.tmp", "w") as fh:
-                fh.write(text)
-        for path in done:
-            os.replace(f"{path}.tmp", path)
-    finally:
-        for path in done:
-            if os.path.exists(f"{path}.tmp"):
-                os.unlink(f"{path}.tmp")
+    """out/matched.md and out/matched.csv, each whole or not at all (core.atomic)."""
+    for name, text in (("matched.md", md), ("matched.csv", df.to_csv(index=False))):
+        write_atomic(os.path.join(out, name), lambda fh, text=text: fh.write(text))
 
 
 if __name__ == "__main__":

@@ -7,6 +7,7 @@ non-zero exit for a single run, while a sweep goes on.
 
 from __future__ import annotations
 
+import contextlib
 import datetime as _dt
 import logging
 import os
@@ -34,6 +35,7 @@ from ddfbench.truth.oracle import Oracle
 from ddfbench.truth.shapes import load_shape
 
 log = logging.getLogger(__name__)
+ERROR_LOG = "error.log"  # in a failed run's folder: the traceback of its failure
 
 
 class StageFailed(RuntimeError):
@@ -170,7 +172,8 @@ def run(cfg: Mapping[str, Any], choices: Mapping[str, str] | None = None,
     The levels the config asks for (capacity, sample_size) are applied first (plugins.job_config), so
     the record key and the record's config are those of the job as it runs. One process at a time runs a
     key (a lock file in its run folder): a second launch of the same key waits, then finds the first's record.
-    An experiment_name that is not one safe folder name raises InputError (no record can be placed); a run
+    An experiment_name that is not one safe folder name, or a force that is not true or false, raises InputError
+    (no record can be placed, or an earlier one would be lost); a run
     folder or record that cannot be written (a full disk, out_dir a file) gives a failed record that is
     returned, not written.
 
@@ -184,6 +187,8 @@ def run(cfg: Mapping[str, Any], choices: Mapping[str, str] | None = None,
         asked = {k: cfg.get(k) for k in plugins.LEVEL_KEYS.values()}
         cfg, bad_level = {**plugins.job_config({**cfg, **dict.fromkeys(asked)}), **asked}, exc
     experiment = checks.safe_name(cfg.get("experiment_name", "single"), "experiment_name")
+    if not isinstance(cfg.get("force", False), bool):  # before an earlier run's record or checkpoint is touched
+        raise InputError(f"force={cfg.get('force')!r}: must be true or false")
     out_dir = str(cfg.get("out_dir", "results"))
     key = runs.config_key(cfg)
     rdir = runs.run_dir(out_dir, experiment, key)
@@ -226,6 +231,12 @@ def _new_record(cfg: Mapping[str, Any], choices: Mapping[str, str], overrides: l
     }
 
 
+def _remove(path: str) -> None:
+    """Delete the file at path if there is one."""
+    with contextlib.suppress(FileNotFoundError):
+        os.remove(path)
+
+
 def _run_locked(cfg: Mapping[str, Any], choices: Mapping[str, str], overrides: list[str] | None, device: str | None,
                 bad_level: InputError | None, experiment: str, key: str, rdir: str) -> dict[str, Any]:
     """run() once it holds the key's lock: skip a key another process finished meanwhile, else run every stage
@@ -234,11 +245,15 @@ def _run_locked(cfg: Mapping[str, Any], choices: Mapping[str, str], overrides: l
     if runs.is_done(rpath) and not cfg.get("force", False):
         return _done(cfg, rpath, rdir)
 
-    if cfg.get("force", False):  # a forced rerun starts its fit over
-        Checkpoint(os.path.join(rdir, CHECKPOINT_FILE)).remove()
     heap_kept = heap.keep_freed_blocks()  # CPU fits reuse their multi-MB activations (ddfbench.core.heap)
     out = _new_record(cfg, choices, overrides, experiment, key)
     try:
+        # a forced rerun starts its fit over, and its old record goes first: a run killed midway leaves no record
+        # beside the new artifacts that would vouch for them; an earlier attempt's error log goes too
+        if cfg.get("force", False):
+            Checkpoint(os.path.join(rdir, CHECKPOINT_FILE)).remove()
+            _remove(rpath)
+        _remove(os.path.join(rdir, ERROR_LOG))
         threads = _set_threads(checked_int(cfg.get("threads") or 0, "threads", 0))
         device = resolve_device(device or str(cfg.get("train", {}).get("device", "cpu")))
         if device.startswith("cuda"):
@@ -254,7 +269,7 @@ def _run_locked(cfg: Mapping[str, Any], choices: Mapping[str, str], overrides: l
     except Exception as exc:  # every failure becomes a record, never a crash mid-sweep
         out["error"] = _record_error(exc)
         try:
-            with open(os.path.join(rdir, "error.log"), "w") as fh:
+            with open(os.path.join(rdir, ERROR_LOG), "w") as fh:
                 fh.write(traceback.format_exc())
         except OSError:  # a full disk: the record below says what failed, or run() reports that it cannot
             pass

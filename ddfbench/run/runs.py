@@ -15,9 +15,9 @@ import platform
 import socket
 import subprocess
 import sys
-import tempfile
 from typing import Any, Mapping
 
+from ddfbench.core.atomic import write_atomic
 from ddfbench.core.errors import one_line
 
 SCHEMA_VERSION = 1
@@ -90,31 +90,9 @@ def _json_safe(value: Any) -> Any:
 
 
 def write_json_atomic(path: str, data: Mapping[str, Any]) -> None:
-    """Write JSON to a temporary file in the same folder, fsync, then rename over path."""
-    folder = os.path.dirname(path) or "."
-    os.makedirs(folder, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=".record.", suffix=".tmp", dir=folder)
-    try:
-        os.fchmod(fd, 0o666 & ~_UMASK)  # readable like every other output (mkstemp makes it 0600)
-        with os.fdopen(fd, "w") as fh:
-            json.dump(_json_safe(dict(data)), fh, indent=1, allow_nan=False)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
-
-
-def _read_umask() -> int:
-    """The process's umask (read once, at import, before any thread: reading it means setting it)."""
-    mask = os.umask(0)
-    os.umask(mask)
-    return mask
-
-
-_UMASK = _read_umask()
+    """Write JSON whole or not at all (core.atomic: a temporary file in the same folder, fsync, rename over path)."""
+    os.makedirs(os.path.dirname(path) or ".", exist_ok=True)
+    write_atomic(path, lambda fh: json.dump(_json_safe(dict(data)), fh, indent=1, allow_nan=False))
 
 
 def record_problem(rec: Mapping[str, Any]) -> str | None:
@@ -156,15 +134,23 @@ def is_done(path: str) -> bool:
 
 def find_records(root: str) -> list[dict[str, Any]]:
     """Every record.json below root (any depth), each with its own folder under "_dir". A file that is not
-    a record (cut short, not UTF-8, not a JSON object) is left out with a line on stderr naming it."""
-    out = []
-    for folder, _, files in os.walk(root):
+    a record (cut short, not UTF-8, not a JSON object, another schema) is left out with a line on stderr naming it,
+    as is a second record of a key already found (a copied run folder: the first in folder order stays)."""
+    out, seen = [], {}
+    for folder, dirs, files in os.walk(root):
+        dirs.sort()
         if RECORD_FILE not in files:
             continue
-        rec, problem = load_record(os.path.join(folder, RECORD_FILE))
+        path = os.path.join(folder, RECORD_FILE)
+        rec, problem = load_record(path)
+        if rec is not None and rec.get("schema_version", SCHEMA_VERSION) != SCHEMA_VERSION:
+            problem = f"schema_version {rec.get('schema_version')!r}, not {SCHEMA_VERSION} (a sweep runs it again)"
+        elif rec is not None and (first := seen.get((rec["experiment"], rec["key"]))) is not None:
+            problem = f"a second record of run {rec['experiment']}/{rec['key']} (the first: {first})"
         if problem:
-            print(f"ddfbench: skipped {os.path.join(folder, RECORD_FILE)}: {problem}", file=sys.stderr)
+            print(f"ddfbench: skipped {path}: {problem}", file=sys.stderr)
         elif rec is not None:
+            seen[(rec["experiment"], rec["key"])] = path
             rec["_dir"] = folder
             out.append(rec)
     return sorted(out, key=lambda r: (r.get("experiment", ""), r.get("key", "")))

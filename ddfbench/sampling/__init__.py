@@ -7,20 +7,23 @@ rejected)` and a config conf/sampling/<name>.yaml; nothing else needs to change 
 from __future__ import annotations
 
 import importlib
+import logging
 import os
 import pkgutil
 import time
+import zipfile
 from typing import Any, Mapping
 
 import numpy as np
 
-from ddfbench.core.errors import InputError
+from ddfbench.core.errors import InputError, one_line
 from ddfbench.sampling.cache import dataset_key, dataset_path
 from ddfbench.sampling.samples import Samples
 from ddfbench.truth.oracle import Oracle
 from ddfbench.truth.shapes import Shape
 
 KINDS = ("rays", "sdf")
+log = logging.getLogger(__name__)
 
 
 def available_strategies() -> list[str]:
@@ -50,7 +53,8 @@ def build(shape: Shape, oracle: Oracle, cfg: Mapping[str, Any], kind: str, seed:
     """Labelled samples for `shape`, the path of their cached .npz, and the info for the run record.
 
     cfg: the sampling config (key `strategy` picks the module); kind: "rays" (x, d, t, hit, line_hit) or
-    "sdf" (x, sdf). A dataset already cached under the same key is loaded instead of rebuilt.
+    "sdf" (x, sdf). A dataset already cached under the same key is loaded instead of rebuilt (one that cannot be
+    read, cut short by a crash or a full disk, is rebuilt over, with a logged line naming it).
     info: strategy, kind, n_samples, n_hit, sampling_s (of the build, also on a cache hit),
     samples_per_s, cache_hit, load_s, rejected {reason: count}, memory_bytes, the strategy's parameters.
     """
@@ -61,9 +65,12 @@ def build(shape: Shape, oracle: Oracle, cfg: Mapping[str, Any], kind: str, seed:
     path = dataset_path(cache_dir, shape, cfg["strategy"], kind, key)
     if os.path.exists(path):
         t0 = time.perf_counter()
-        samples = Samples.load_npz(path)
-        info = dict(samples.meta, cache_hit=True, load_s=time.perf_counter() - t0)
-        return samples, path, info
+        try:
+            samples = Samples.load_npz(path)
+        except (OSError, ValueError, EOFError, KeyError, zipfile.BadZipFile) as exc:  # cut short, garbled
+            log.warning("%s: not a readable dataset (%s): built anew", path, one_line(exc))
+        else:
+            return samples, path, dict(samples.meta, cache_hit=True, load_s=time.perf_counter() - t0)
 
     t0 = time.perf_counter()
     samples, params, rejected = module.sample(shape, oracle, cfg, kind, np.random.default_rng(seed))

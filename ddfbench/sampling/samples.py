@@ -4,11 +4,12 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import os
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+
+from ddfbench.core.atomic import write_atomic
 
 
 @dataclass
@@ -47,12 +48,10 @@ class Samples:
             if f.name != "meta" and getattr(self, f.name) is not None})
 
     def save_npz(self, path: str) -> None:
-        """Write atomically (temporary file, then rename) so a reader never sees half a file."""
+        """Write whole or not at all (core.atomic), so a reader never sees half a file."""
         arrays = {k: v for k in ("x", "d", "t", "hit", "line_hit", "sdf") if (v := getattr(self, k)) is not None}
         arrays["meta"] = np.array(json.dumps(self.meta))
-        tmp = f"{path}.tmp{os.getpid()}.npz"
-        np.savez(tmp, **arrays)
-        os.replace(tmp, path)
+        write_atomic(path, lambda fh: np.savez(fh, **arrays), "wb")
 
     @staticmethod
     def load_npz(path: str) -> "Samples":

@@ -1,0 +1,41 @@
+"""Files written whole or not at all: a reader, or a process killed midway, finds the old file or the whole new one.
+
+`write_atomic` fills a temporary file beside the target, syncs it to disk and renames it over the target. Run
+records, datasets, fit checkpoints, compact records and bench tables are written through it. This module imports
+nothing of ddfbench, so any layer may use it.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from typing import IO, Any, Callable
+
+
+def _read_umask() -> int:
+    """The process's umask (read once, at import, before any thread: reading it means setting it)."""
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+UMASK = _read_umask()
+
+
+def write_atomic(path: str, write: Callable[[IO[Any]], None], mode: str = "w") -> str:
+    """Fill a temporary file in path's folder by write(fh) (mode "w" text, "wb" bytes), fsync it, then rename it
+    over path; return path. A failure removes the temporary file and raises. The file is readable like every other
+    output (0666 less the umask; mkstemp alone makes it 0600)."""
+    fd, tmp = tempfile.mkstemp(prefix=f".{os.path.basename(path)}.", suffix=".tmp", dir=os.path.dirname(path) or ".")
+    try:
+        os.fchmod(fd, 0o666 & ~UMASK)
+        with os.fdopen(fd, mode) as fh:
+            write(fh)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+    return path
