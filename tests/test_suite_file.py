@@ -265,6 +265,46 @@ def test_the_plan_says_which_experiments_add_sweeps_it_does_not_count(capsys):
     assert lines[2].startswith("default") and lines[3].startswith("total")  # none after default
 
 
+def test_a_file_changed_only_by_result_neutral_commits_is_not_stale(monkeypatch, tmp_path):
+    """A commit the suite file declares result-neutral (it changed the stale scope, no measured value) is not
+    counted; a later change of the same file is."""
+    def git(*args):
+        return subprocess.run(["git", "-C", str(tmp_path), "-c", "user.name=t", "-c", "user.email=t@t", *args],
+                              capture_output=True, text=True, check=True).stdout.strip()
+
+    def commit(text):
+        (tmp_path / "ddfbench" / "run" / "runner.py").write_text(text)
+        git("commit", "-qam", text)
+        return git("rev-parse", "HEAD")
+
+    (tmp_path / "ddfbench" / "run").mkdir(parents=True)
+    (tmp_path / "ddfbench" / "run" / "runner.py").write_text("ran")
+    git("init", "-q")
+    git("add", "-A")
+    git("commit", "-qm", "ran")
+    ran = git("rev-parse", "HEAD")
+    monkeypatch.setattr(suite, "ROOT", str(tmp_path))
+    entry, recs = suite.Entry("default", "reports/default"), [record(ran, "mesh", "mesh")]
+    neutral = {commit("an atomic writer")[:7]: "writes the same bytes"}
+    assert suite.stale(entry, recs) == (ran[:7], ["ddfbench/run/runner.py"])
+    assert suite.stale(entry, recs, neutral) == (ran[:7], [])
+    commit("a new loss")
+    assert suite.stale(entry, recs, neutral) == (ran[:7], ["ddfbench/run/runner.py"])
+
+
+def test_a_malformed_result_neutral_entry_is_one_line_naming_it(monkeypatch, tmp_path):
+    (tmp_path / "suite").mkdir()
+    monkeypatch.setattr(suite, "CONF_DIR", str(tmp_path))
+    (tmp_path / "suite" / "s.yaml").write_text("result_neutral: {abc: same}\n")
+    with pytest.raises(InputError, match=r"^conf/suite/s.yaml: result_neutral.abc: needs a commit \(7 to 40 hex"):
+        suite.load_neutral("s")
+    (tmp_path / "suite" / "s.yaml").write_text("result_neutral: {abcdef0: ''}\n")
+    with pytest.raises(InputError, match=r"result_neutral.abcdef0: needs a commit .* and why"):
+        suite.load_neutral("s")
+    (tmp_path / "suite" / "s.yaml").write_text("tiers: {}\n")
+    assert suite.load_neutral("s") == {}
+
+
 def test_the_suite_refuses_a_tree_that_is_not_a_git_checkout(monkeypatch, tmp_path, capsys):
     monkeypatch.setattr(suite, "ROOT", str(tmp_path))  # a wheel's site-packages: reports/ there is no one's
     assert suite.main(["run", "v1", "--tier", "core", "--dry-run"]) == 2

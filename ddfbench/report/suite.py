@@ -19,6 +19,7 @@ from __future__ import annotations
 import argparse
 import datetime as dt
 import os
+import re
 import shlex
 import statistics
 import subprocess
@@ -352,10 +353,35 @@ RESULT_NEUTRAL = ("ddfbench/run/checks.py", "ddfbench/run/overrides.py", "ddfben
                   "ddfbench/run/tracking.py", "ddfbench/run/worker_guard.py")
 
 
-def stale(entry: Entry, records: list[dict[str, Any]]) -> tuple[str, list[str]]:
+def load_neutral(name: str) -> dict[str, str]:
+    """{commit: why} of conf/suite/<name>.yaml's `result_neutral`: commits that changed code of the stale scope but
+    no measured value of a run; a one-line InputError naming the file and key when malformed."""
+    spec = OmegaConf.to_container(OmegaConf.load(os.path.join(CONF_DIR, "suite", f"{name}.yaml"))) or {}
+    neutral = spec.get("result_neutral") or {}  # type: ignore[union-attr]
+    where = f"conf/suite/{name}.yaml: result_neutral"
+    if not isinstance(neutral, dict):
+        raise InputError(f"{where}: needs {{commit: why the commit changes no measured value}}")
+    for commit, why in neutral.items():
+        if not re.fullmatch(r"[0-9a-f]{7,40}", str(commit)) or not isinstance(why, str) or not why.strip():
+            raise InputError(f"{where}.{commit}: needs a commit (7 to 40 hex digits) and why it changes no "
+                             "measured value")
+    return {str(c): str(w) for c, w in neutral.items()}
+
+
+def _only_neutral_commits(since: str, path: str, neutral: dict[str, str]) -> bool:
+    """Whether every commit after `since` that touched path is one of the result-neutral ones."""
+    log = subprocess.run(["git", "-C", ROOT, "log", "--format=%H", f"{since}..HEAD", "--", path],
+                         capture_output=True, text=True)
+    commits = log.stdout.split()
+    return log.returncode == 0 and bool(commits) and all(any(c.startswith(n) for n in neutral) for c in commits)
+
+
+def stale(entry: Entry, records: list[dict[str, Any]],
+          neutral: dict[str, str] | None = None) -> tuple[str, list[str]]:
     """(the records' code commit(s), files of the models' families and configs changed or removed since the oldest
-    one; a file added since is not a change to the code that ran). ("", []) where no record names its code commit
-    (records run outside a git checkout)."""
+    one; a file added since is not a change to the code that ran, nor one whose every change since is a commit of
+    `neutral`, load_neutral). ("", []) where no record names its code commit (records run outside a git
+    checkout)."""
     shas = sorted({str((r.get("env") or {}).get("code_sha")) for r in records if (r.get("env") or {}).get("code_sha")})
     if not shas:
         return "", []
@@ -376,7 +402,8 @@ def stale(entry: Entry, records: list[dict[str, Any]]) -> tuple[str, list[str]]:
                               capture_output=True, text=True)
         if done.returncode != 0:
             return ", ".join(s[:7] for s in shas), [f"commit {sha[:7]} is not in this clone"]
-        changed += [path for path in done.stdout.split() if not _only_membership_changed(sha, path)]
+        changed += [path for path in done.stdout.split() if not _only_membership_changed(sha, path)
+                    and not (neutral and _only_neutral_commits(sha, path, neutral))]
     return ", ".join(s[:7] for s in shas), sorted(set(changed))
 
 
@@ -398,17 +425,20 @@ def status(suite: str) -> int:
     """Print each report of the suite with its records' commit and whether it is stale; 1 when any is stale or
     unknown."""
     records = committed_records(os.path.join(ROOT, "reports"))
+    neutral = load_neutral(suite)
     worst = 0
     for tier, entries in load_suite(suite).items():
         for entry in entries:
             recs = records.get(entry.report, [])
-            commits, changed = stale(entry, recs) if recs else ("", [])
+            commits, changed = stale(entry, recs, neutral) if recs else ("", [])
             state = "stale" if changed else ("current" if commits else "unknown")
             worst = max(worst, 1 if state != "current" else 0)
             print(f"{tier:<5} {entry.experiment:<16} {entry.report:<28} {state:<8} "
                   + (f"records of {commits}" if commits else
                      "records that name no code commit" if recs else "no records committed")
                   + (f"; changed since: {', '.join(changed[:4])}{' ...' if len(changed) > 4 else ''}" if changed else ""))
+    for commit, why in neutral.items():
+        print(f"not counted, result-neutral (conf/suite/{suite}.yaml): {commit}: {why}")
     return worst
 
 
@@ -416,8 +446,7 @@ def check_checkout() -> None:
     """The suite plans from, judges and writes the committed reports/ of a git checkout of ddfbench (ROOT): a one-line
     InputError where ROOT is not the top of one (a wheel installed into site-packages)."""
     check_conf_found()
-    top = subprocess.run(["git", "-C", ROOT, "rev-parse", "--show-toplevel"], capture_output=True, text=True)
-    if top.returncode != 0 or os.path.realpath(top.stdout.strip()) != os.path.realpath(ROOT):
+    if not os.path.exists(os.path.join(ROOT, ".git")):  # a folder; in a git worktree, a file
         raise InputError(f"{ROOT}: not the top of a git checkout of ddfbench; the suite reads and writes the "
                          "committed reports/ of one (git clone the repository, then pip install -e . in it)")
 
