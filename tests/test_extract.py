@@ -143,6 +143,19 @@ def test_nan_values_are_counted():
     assert np.abs(np.linalg.norm(mesh.vertices, axis=1) - R0).max() < 0.01
 
 
+@pytest.mark.parametrize("sign", [1.0, -1.0])
+def test_infinite_cells_alone_across_the_level_mesh_as_their_pocket(sign):
+    """A diverged network: every finite value far on one side of the level (-10: inside), NaN (or -inf) in a ball
+    of radius 0.3. The ball is meshed as the far side, as marching cubes sees it; it once raised."""
+    p = grid_points(33, 0.6).reshape(33, 33, 33, 3)
+    values = np.full((33, 33, 33), -10.0 * sign, np.float32)
+    values[np.linalg.norm(p, axis=-1) < 0.3] = np.nan if sign > 0 else -np.inf
+    mesh, info = field_to_mesh(values, 0.6, 0.0)
+    r = np.linalg.norm(mesh.vertices, axis=1)
+    assert not info["empty"] and info["nonfinite"] == (np.isnan(values).sum())
+    assert 0.25 < r.min() and r.max() < 0.3 + 0.6 / 32  # the pocket's wall, between its nodes and the next ones
+
+
 def test_bad_arguments_raise_input_errors():
     with pytest.raises(InputError):
         udf_to_mesh(sphere_sdf, 17, 0.6, 0.0)

@@ -81,9 +81,11 @@ def field_to_mesh(values: np.ndarray, domain: float, level: float):
     if finite.size == 0 or not (values.min() < level < values.max()):
         info["reason"] = "field does not cross the level"
         return empty_mesh(), info
-    # marching cubes needs finite input: put +-inf just beyond the finite range (keeps the crossing)
+    # marching cubes needs finite input: put +-inf just beyond the finite range (keeps the crossing), and beyond the
+    # level where the infinite cells alone cross it (NaN pockets of a field wholly inside: the pockets' mesh)
     span = float(finite.max() - finite.min()) + abs(level) + 1.0
-    values = np.clip(values, finite.min() - span, finite.max() + span)
+    high, low = float(finite.max()) + span, float(finite.min()) - span
+    values = np.clip(values, low if low <= level else level - span, high if high >= level else level + span)
     spacing = 2 * domain / (values.shape[0] - 1)
     verts, faces, _, _ = measure.marching_cubes(
         values, level=level, spacing=(spacing,) * 3, allow_degenerate=False,
