@@ -404,13 +404,15 @@ def test_a_value_defined_in_fewer_runs_than_n_says_over_how_many():
     assert "depth_mae_n" not in md and "(of " not in tables.to_markdown(tables.summarize(recs[:2]))
 
 
-def test_records_from_mixed_commits_are_refused_unless_allowed(tmp_path):
-    recs = [make_record(seed=0), make_record(seed=1)]
+def test_records_from_mixed_commits_are_refused_unless_allowed(tmp_path, capsys):
+    recs = [make_record(seed=0), make_record(seed=1), make_record(seed=2)]
     recs[1]["env"] = {"git_sha": "def"}
     for r in recs:
         write_json_atomic(str(tmp_path / "rec" / r["key"] / "record.json"), r)
     out = tmp_path / "rep"
     assert report_main([str(tmp_path / "rec"), "--out", str(out), "--plots", "none"]) == 2
+    assert (f"records from 2 code commits (def: 1 record, e.g. {tmp_path / 'rec' / recs[1]['key']}; abc: 2 records, "
+            "e.g. ") in capsys.readouterr().err  # which records to rerun
     assert not (out / "table.md").exists()
     assert report_main([str(tmp_path / "rec"), "--out", str(out), "--plots", "none", "--allow-mixed-commits"]) == 0
     assert "Mixed code commits: abc, def" in (out / "report.md").read_text()

@@ -85,6 +85,15 @@ class MixedCommits(ValueError):
     """Records of one report come from more than one code commit."""
 
 
+def by_commit(records: list[dict[str, Any]]) -> str:
+    """Each code commit of the records with its record count and one run folder (key), fewest first."""
+    groups: dict[str, list[dict[str, Any]]] = {}
+    for rec in records:
+        groups.setdefault(code_commits([rec])[0], []).append(rec)
+    return "; ".join(f"{sha}: {len(recs)} record{'s' * (len(recs) > 1)}, e.g. {recs[0].get('_dir') or recs[0]['key']}"
+                     for sha, recs in sorted(groups.items(), key=lambda item: (len(item[1]), item[0])))
+
+
 SOURCE_OF_KIND = {
     None: "the exact mesh (no training samples)",
     "rays": "ray samples: exact hit distances and hit / line-hit labels from the sampler",
@@ -135,8 +144,8 @@ def write_report(source: str, out_dir: str, note: str | None = None,
         raise InputError(f"{source}: no run records{hint}: nothing written")
     shas = code_commits(records)
     if len(shas) > 1 and not allow_mixed_commits:
-        raise MixedCommits(f"{source}: records from {len(shas)} code commits ({', '.join(shas)}); rerun them "
-                           "on one commit or pass --allow-mixed-commits")
+        raise MixedCommits(f"{source}: records from {len(shas)} code commits ({by_commit(records)}); rerun the "
+                           "odd ones with force=true on one commit, or pass --allow-mixed-commits")
     experiment = _experiment(records, source)
     kind = _experiment_file(records, experiment)
     # the tuning protocol's table holds the seeds its candidates are scored on; its confirmation's runs have a section
