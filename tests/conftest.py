@@ -1,5 +1,8 @@
 """Shared fixtures: small normalized meshes and a seeded generator."""
 
+import os
+import tempfile
+
 import numpy as np
 import pytest
 import torch
@@ -7,6 +10,12 @@ import torch
 from ddfbench.truth.shapes import load_shape
 
 torch.set_num_threads(1)
+
+# hypothesis keeps its example database and caches in ./.hypothesis/ unless told otherwise: keep them out of the
+# checkout, in one folder of the temp dir (failing examples still replay on the next run); the profiles stay as they
+# are (a settings profile with database=None would not do: the constants cache is written all the same).
+os.environ.setdefault("HYPOTHESIS_STORAGE_DIRECTORY",
+                      os.path.join(tempfile.gettempdir(), f"ddfbench-hypothesis-{os.getuid()}"))
 
 
 @pytest.fixture(scope="session")

@@ -121,7 +121,11 @@ def test_a_record_that_is_not_one_is_rerun_and_skipped_by_the_report(tmp_path, c
     assert capsys.readouterr().err.count(path) == 1  # reported once, with its path
     from ddfbench.report.__main__ import main as report_main
 
-    report_main([str(tmp_path / "out"), "--out", str(tmp_path / "rep")])  # no records: says so, does not raise
+    assert report_main([str(tmp_path / "out"), "--out", str(tmp_path / "rep")]) == 2  # no records: says so, no raise
+    err = capsys.readouterr().err.splitlines()
+    assert err[0].startswith(f"ddfbench: skipped {path}: not a run record")
+    assert err[1:] == [f"ddfbench.report: {tmp_path / 'out'}: no run records: nothing written"]
+    assert not os.path.exists(tmp_path / "rep")
     assert runner.run(cfg)["status"] == "ok" and is_done(path)  # the next launch runs it
 
 

@@ -265,7 +265,7 @@ def test_save_load_round_trip_and_storage(fitted, tmp_path):
 
 
 def test_load_rejects_foreign_and_broken_artifacts(tmp_path):
-    with pytest.raises(InputError):
+    with pytest.raises(InputError, match=r"^ddf artifact \S*/missing: unreadable \("):
         DDF.load(str(tmp_path / "missing"))
     torch.save({}, tmp_path / "empty.pt")
     with pytest.raises(InputError, match="unreadable"):
@@ -302,23 +302,23 @@ def test_nan_guard_fires_on_forced_divergence(sphere_oracle):
 
 def test_bad_config_and_samples_raise_input_errors(sphere_oracle):
     mesh, oracle = sphere_oracle
-    with pytest.raises(InputError):
+    with pytest.raises(InputError, match=r"^model\.param 'polar': unknown \(one of point, ray\)$"):
         DDF({"param": "polar"})
-    with pytest.raises(InputError):
+    with pytest.raises(InputError, match=r"^model\.width 0: must be a positive integer$"):
         DDF({"width": 0})
-    with pytest.raises(InputError):
+    with pytest.raises(InputError, match=r"^model\.mesh_band 0: must be > 0$"):
         DDF({"mesh_band": 0})
-    with pytest.raises(InputError):
+    with pytest.raises(InputError, match=r"^model\.entry_share 1\.0: must be in \[0, 1\)$"):
         DDF({"entry_share": 1.0})
-    with pytest.raises(InputError):
+    with pytest.raises(InputError, match=r"^model\.mesh_field 'points': unknown \(one of signed, udf\)$"):
         DDF({"mesh_field": "points"})
-    with pytest.raises(InputError):
+    with pytest.raises(InputError, match=r"^model\.visibility 'clamp' needs model\.loss 'clamp' or 'clamp_misses'"):
         DDF({"visibility": "clamp", "loss": "l1"})
     for delta in (0.0, float("inf")):
         with pytest.raises(InputError, match="model.delta"):
             DDF({"visibility": "clamp", "loss": "clamp_misses", "delta": delta})
     assert DDF({"visibility": "clamp", "loss": "clamp_misses", "delta": 0.5}).cfg["loss"] == "clamp_misses"
-    with pytest.raises(InputError):
+    with pytest.raises(InputError, match=r"^model ddf: needs ray samples \(x, d, t, hit\); the sampler gave none$"):
         DDF(SMALL).fit(FitData(Samples(x=np.zeros((4, 3), np.float32)), mesh, oracle), Budget(max_steps=1))
 
 

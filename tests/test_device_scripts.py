@@ -45,10 +45,26 @@ def test_the_maker_copies_every_script_that_exists_and_runs_from_the_root():
     assert set(copies()) == set(SCRIPTS) - {MAKER}
 
 
-@pytest.mark.parametrize("name", sorted(set(SCRIPTS) - {MAKER}))
+def sourced() -> set[tuple[str, str]]:
+    """(script, staging folder) of each `source .devB/setup_b.sh` in the scripts: a sourced one runs in its caller's
+    folder, so it needs no cd of its own."""
+    found = (re.findall(r"source (\.dev[AB])/(\S+\.sh)", text(other)) for other in SCRIPTS)
+    return {(name, folder) for pairs in found for folder, name in pairs}
+
+
+SOURCED = {name for name, _ in sourced()}
+
+
+def test_a_copied_script_without_a_cd_of_its_own_is_sourced_from_where_it_is_staged():
+    no_cd = {name for name in set(SCRIPTS) - {MAKER} if not re.search(r'^cd "\$\(dirname "\$0"\)/', text(name), re.M)}
+    assert no_cd == SOURCED
+    assert all(copies()[name] == folder for name, folder in sourced()), sourced()
+
+
+@pytest.mark.parametrize("name", sorted(set(SCRIPTS) - {MAKER} - SOURCED))
 def test_a_copied_script_reaches_the_root_from_its_staging_folder(name):
     staged_in = os.path.join(ROOT, copies()[name])
-    assert cd_target(name, staged_in) == ROOT if "cd " in text(name) else True
+    assert cd_target(name, staged_in) == ROOT
 
 
 def test_the_training_call_brings_its_run_folders_back_as_one_file():

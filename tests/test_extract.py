@@ -157,11 +157,11 @@ def test_infinite_cells_alone_across_the_level_mesh_as_their_pocket(sign):
 
 
 def test_bad_arguments_raise_input_errors():
-    with pytest.raises(InputError):
+    with pytest.raises(InputError, match=r"^udf level 0\.0: must be > 0 "):
         udf_to_mesh(sphere_sdf, 17, 0.6, 0.0)
-    with pytest.raises(InputError):
+    with pytest.raises(InputError, match=r"^mesh resolution 1: must be at least 2$"):
         grid_points(1, 0.6)
-    with pytest.raises(InputError):
+    with pytest.raises(InputError, match=r"^field grid of shape \(4, 4, 5\): must be a cube \(R, R, R\)$"):
         field_to_mesh(np.zeros((4, 4, 5)), 0.6, 0.0)
 
 

@@ -6,11 +6,13 @@ import itertools
 import json
 import math
 
+import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from matplotlib.container import BarContainer
 
 from ddfbench.report import plots, records, stats, tables
 from ddfbench.report.__main__ import main as report_main
@@ -157,6 +159,25 @@ def test_ci_is_a_t_interval_over_seeds():
     assert row["chamfer_l2_mean"] - row["chamfer_l2_ci_lo"] == pytest.approx(half)
 
 
+def test_welch_ratio_is_the_unequal_variance_t_test_of_two_samples_of_logs():
+    """welch_ratio(log x, log y): exp of the difference of mean logs, its Welch–Satterthwaite t interval at the given
+    level and scipy's unequal-variance t test p on the logs; two constant samples give the ratio alone."""
+    from scipy import stats as sps
+
+    a, b = np.log([1.0e-3, 1.4e-3, 0.9e-3, 1.1e-3, 1.05e-3]), np.log([2.0e-3, 6.5e-3, 1.2e-3])  # unequal spreads
+    w = stats.welch_ratio(a, b)
+    assert w["p"] == pytest.approx(sps.ttest_ind(a, b, equal_var=False).pvalue, rel=1e-9)
+    diff = np.mean(a) - np.mean(b)
+    va, vb = np.var(a, ddof=1) / 5, np.var(b, ddof=1) / 3
+    df = (va + vb) ** 2 / (va**2 / 4 + vb**2 / 2)  # Welch–Satterthwaite
+    assert w["ratio"] == pytest.approx(np.exp(diff), rel=1e-12)
+    for level, q in ((0.95, 0.975), (0.9, 0.95)):
+        half = sps.t.ppf(q, df) * np.sqrt(va + vb)
+        got = w if level == 0.95 else stats.welch_ratio(a, b, level=level)
+        assert (got["lo"], got["hi"]) == pytest.approx((np.exp(diff - half), np.exp(diff + half)), rel=1e-9), level
+    assert stats.welch_ratio(np.log([2.0, 2.0]), np.log([0.5, 0.5, 0.5])) == pytest.approx({"ratio": 4.0})
+
+
 def test_no_interval_bound_leaves_the_metric_s_range():
     """Skewed seeds (one chamfer 20x the others, F-scores near 1, a signed offset) give t intervals across 0 and 1;
     the table cuts them to [0, inf), [0, 1], and leaves the signed offset's alone."""
@@ -267,6 +288,111 @@ def test_sampling_lines_follow_labels_per_strategy_and_skip_meshes():
     lines = plots.sampling_lines(recs)
     assert set(lines) == {("ddf", "random"), ("ddf", "pov")}
     assert [n for n, _, _ in lines[("ddf", "pov")]] == [1000, 2000, 4000]
+
+
+@pytest.fixture
+def drawn(monkeypatch):
+    """{plot name: figure}: plots._save patched to keep each figure instead of writing it."""
+    figures = {}
+
+    def keep(fig, out_dir, name):
+        figures[name] = fig
+        return [name]
+
+    monkeypatch.setattr(plots, "_save", keep)
+    yield figures
+    for fig in figures.values():
+        plt.close(fig)
+
+
+def bar_heights(ax):
+    """{(tick label under the bar, bar label): (height, half error bar or None)} of the bars drawn on ax."""
+    ticks = [t.get_text() for t in ax.get_xticklabels()]
+    out = {}
+    for bars in ax.containers:
+        if not isinstance(bars, BarContainer):
+            continue
+        errs = bars.errorbar.lines[2][0].get_segments() if bars.errorbar else [None] * len(bars)
+        for patch, seg in zip(bars, errs):
+            tick = ticks[round(patch.get_x() + patch.get_width() / 2)]
+            out[(tick, bars.get_label())] = (patch.get_height(), None if seg is None else (seg[1][1] - seg[0][1]) / 2)
+    return out
+
+
+def test_render_time_bars_are_the_mean_cold_and_warm_render_per_model_and_size(drawn):
+    """Each bar is the mean render_cold_s / render_warm_s over the ok runs of one model at one image size; a model
+    without runs at a size gets no bar (NaN), failed runs and runs that rendered nothing are left out."""
+    runs = {("ddf", 32, 32): [(0.9, 0.1), (1.5, 0.3)], ("ddf", 64, 48): [(2.0, 0.5), (3.0, 0.7), (4.0, 0.6)],
+            ("mesh", 32, 32): [(0.05, 0.02)]}
+    recs = [make_record(model=m, seed=i, scene={"width": w, "height": h},
+                        cost={"render_cold_s": cold, "render_warm_s": warm})
+            for (m, w, h), times in runs.items() for i, (cold, warm) in enumerate(times)]
+    recs.append(make_record(model="mesh", seed=5, status="failed", scene={"width": 64, "height": 48},
+                            cost={"render_cold_s": 9.0, "render_warm_s": 9.0}))
+    recs.append(make_record(model="grid_sdf", cost={"fit_s": 1.0}))  # no render
+    assert plots.plot_render_time(recs, "/unused") == ["render_time"]
+    (ax,) = drawn["render_time"].axes
+    heights = {key: h for key, (h, _) in bar_heights(ax).items()}
+    assert [t.get_text() for t in ax.get_xticklabels()] == ["ddf", "mesh"]
+    expected = {("ddf", "32×32 cold"): 1.2, ("ddf", "32×32 warm"): 0.2, ("ddf", "64×48 cold"): 3.0,
+                ("ddf", "64×48 warm"): 0.6, ("mesh", "32×32 cold"): 0.05, ("mesh", "32×32 warm"): 0.02,
+                ("mesh", "64×48 cold"): math.nan, ("mesh", "64×48 warm"): math.nan}  # the means of `runs`
+    assert heights == pytest.approx(expected, nan_ok=True)
+
+
+def test_frames_by_shape_bars_are_the_mean_warm_frame_over_seeds_with_its_std(drawn):
+    """One bar per shape and model: the mean render_warm_s over the ok seeds, its error bar the std over seeds (0 for
+    one seed); shapes ordered by the mesh's face count, which their tick names."""
+    warm = {("bunny", "ddf"): [0.2, 0.4, 0.9], ("bunny", "mesh"): [0.01, 0.03], ("sphere", "ddf"): [0.5],
+            ("sphere", "mesh"): [0.002, 0.004]}
+    faces = {"bunny": 5000, "sphere": 1280}
+    recs = []
+    for (shape, model), values in warm.items():
+        for seed, w in enumerate(values):
+            recs.append(make_record(model=model, shape=shape, seed=seed, cost={"render_warm_s": w}))
+            recs[-1]["fit"]["faces"] = faces[shape] if model == "mesh" else None
+    recs.append(make_record(model="ddf", shape="bunny", seed=7, status="failed", cost={"render_warm_s": 50.0}))
+    assert plots.plot_frames_by_shape(recs, "/unused") == ["frames_by_shape"]
+    (ax,) = drawn["frames_by_shape"].axes
+    assert [t.get_text() for t in ax.get_xticklabels()] == ["sphere\n1,280 faces", "bunny\n5,000 faces"]
+    bars = {(tick.split("\n")[0], model): v for (tick, model), v in bar_heights(ax).items()}
+    assert set(bars) == set(warm)
+    for key, values in warm.items():
+        height, half = bars[key]
+        assert height == pytest.approx(np.mean(values)), key
+        assert half == pytest.approx(np.std(values, ddof=1) if len(values) > 1 else 0.0, abs=1e-12), key
+
+
+def test_fit_curves_draw_each_runs_positive_probes_per_shape_with_empty_meshes_as_crosses(drawn):
+    """One line per ok run with two or more finite positive probes, in its shape's panel: x the probe's fit seconds,
+    y its chamfer L2; a probe at the empty-mesh penalty is a cross, the others dots."""
+    penalty = plots.PENALTY_CHAMFER_L2  # the value that marks an empty reconstruction (input, not output)
+    probes = {
+        ("ddf", "bunny"): [(0.5, 4e-3), (2.0, 1e-3), (8.0, 3e-4)],
+        ("neural_sdf", "bunny"): [(0.0, 5e-3), (1.0, penalty), (4.0, 2e-3), (16.0, None)],  # t=0, no value: undrawn
+        ("ddf", "sphere"): [(0.25, 6e-4), (1.0, 1e-4)],
+        ("neural_sdf", "sphere"): [(1.0, 1e-3)],  # one probe: no line
+    }
+
+    def as_probes(pts):
+        return [{"step": i, "seconds": t, "chamfer_l2": c} for i, (t, c) in enumerate(pts)]
+
+    recs = [make_record(model=m, shape=s, probes=as_probes(p)) for (m, s), p in probes.items()]
+    failed = as_probes([(1.0, 1.0), (2.0, 1.0)])
+    recs.append(make_record(model="ddf", shape="sphere", seed=3, status="failed", probes=failed))
+    assert plots.plot_fit_curves(recs, "/unused") == ["fit_curves"]
+    expected = {"bunny": {((0.5, 2.0, 8.0), (4e-3, 1e-3, 3e-4)), ((1.0, 4.0), (penalty, 2e-3))},
+                "sphere": {((0.25, 1.0), (6e-4, 1e-4))}}
+    axes = drawn["fit_curves"].axes
+    assert [ax.get_title() for ax in axes] == ["bunny", "sphere"]
+    for ax in axes:
+        curves = {(tuple(ln.get_xdata()), tuple(ln.get_ydata())) for ln in ax.get_lines()
+                  if ln.get_linestyle() == "-" and ln.get_marker() in ("None", "", None)}
+        assert curves == expected[ax.get_title()], ax.get_title()
+        marks = {m: sorted(y for ln in ax.get_lines() if ln.get_marker() == m for y in ln.get_ydata()) for m in "ox"}
+        drawn_y = sorted(y for _, ys in expected[ax.get_title()] for y in ys)
+        assert marks["x"] == [y for y in drawn_y if y == penalty]
+        assert marks["o"] == [y for y in drawn_y if y != penalty]
 
 
 def test_report_command_writes_parseable_files(tmp_path):

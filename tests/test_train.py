@@ -7,6 +7,7 @@ import torch
 
 from ddfbench.core.errors import InputError
 from ddfbench.core.representation import Budget
+from ddfbench.fit import train
 from ddfbench.fit.train import Schedule, probe_fractions, resolve_device, seed_everything, train_loop
 
 
@@ -81,13 +82,24 @@ def test_probes_are_log_spaced_in_eval_mode_and_not_charged_to_training():
     assert probe_fractions(3) == [1 / 9, 1 / 3, 1]
 
 
-def test_probe_time_does_not_eat_the_wall_clock_budget():
+def test_probe_time_does_not_eat_the_wall_clock_budget(monkeypatch):
+    """On a fake clock (a step costs 1/64 s, a probe 1 s: four times the 0.25 s budget) the budget buys exactly 16
+    steps and every probe fires at its fraction of them; the probes' 3 s are counted apart."""
+    now = [0.0]
+
+    def spend(seconds):
+        now[0] += seconds
+
+    monkeypatch.setattr(train, "clock", lambda: now[0])  # the loop's training clock
+    monkeypatch.setattr(train.time, "perf_counter", lambda: now[0])  # the probes' timer
     model, step_fn, _ = regression()
     opt = torch.optim.SGD(model.parameters(), lr=0.01)
-    probe = lambda: time.sleep(0.3) or {}  # noqa: E731
-    stats = train_loop(model, opt, slowed(step_fn, 0.005), Budget(max_steps=10**6, max_seconds=0.3, n_probes=3), probe_fn=probe,
+    stats = train_loop(model, opt, lambda s: spend(1 / 64) or step_fn(s),
+                       Budget(max_steps=10**6, max_seconds=0.25, n_probes=3), probe_fn=lambda: spend(1.0) or {},
                        quiet=True)
-    assert len(stats.probes) == 3 and stats.extra["stop"] == "max_seconds"
+    assert stats.extra["stop"] == "max_seconds" and stats.steps == 16 and stats.seconds == 0.25
+    assert [(p["step"], p["seconds"]) for p in stats.probes] == [(2, 2 / 64), (6, 6 / 64), (16, 0.25)]  # 1/9, 1/3, 1
+    assert stats.extra["probe_seconds"] == 3.0
 
 
 def test_schedule_factors_and_lr_applied():
@@ -102,9 +114,9 @@ def test_schedule_factors_and_lr_applied():
     stats = train_loop(model, opt, lambda s: 0.0 * step_fn(s), Budget(max_steps=100, max_seconds=1e6, n_probes=0),
                        schedule=exp, quiet=True)
     assert stats.extra["final_lr"] == pytest.approx(0.01 ** 0.99)
-    with pytest.raises(InputError):
+    with pytest.raises(InputError, match=r"^lr schedule 'linear': unknown \(constant \| cosine \| exponential\)$"):
         Schedule("linear")
-    with pytest.raises(InputError):
+    with pytest.raises(InputError, match=r"^lr final_ratio 0\.0: must be in \(0, 1\]$"):
         Schedule.from_cfg({"lr_schedule": "cosine", "lr_final_ratio": 0, "lr_warmup": 0.0})
 
 
@@ -166,11 +178,11 @@ def test_nan_guard_catches_weights_that_go_bad_without_a_bad_loss():
 def test_devices_and_budget_validation():
     assert resolve_device("cpu") == "cpu"
     assert resolve_device("auto") == ("cuda" if torch.cuda.is_available() else "cpu")
-    with pytest.raises(InputError):
+    with pytest.raises(InputError, match=r"^train\.device 'tpu': unknown device \(cpu \| cuda \| auto\)$"):
         resolve_device("tpu")
     if not torch.cuda.is_available():
-        with pytest.raises(InputError):
+        with pytest.raises(InputError, match=r"^train\.device 'cuda': CUDA is not available on this machine"):
             resolve_device("cuda")
     model, step_fn, _ = regression()
-    with pytest.raises(InputError):
+    with pytest.raises(InputError, match=r"^train budget max_steps=0, max_seconds=\S+: both must be > 0$"):
         train_loop(model, torch.optim.SGD(model.parameters(), lr=0.1), step_fn, Budget(max_steps=0))
