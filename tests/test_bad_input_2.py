@@ -110,7 +110,7 @@ def test_plain_overrides_of_declared_keys_groups_and_hydra_pass_the_key_check():
 # ---- records that break the report forever ----------------------------------------------------------
 @pytest.mark.parametrize("content", [{"status": "ok"}, {"status": "ok", "key": "k", "experiment": "e", "metrics": [1],
                                                         "cost": {}, "config": {}}, {"status": "done"}])
-def test_a_record_that_is_not_one_is_rerun_and_skipped_by_the_report(tmp_path, capsys, content):
+def test_a_record_that_is_not_one_is_rerun_and_skipped_by_the_report(tmp_path, capsys, content, monkeypatch):
     cfg = job(tmp_path)
     path = runs.record_path(str(tmp_path / "out"), "single", config_key(cfg))
     os.makedirs(os.path.dirname(path))
@@ -127,6 +127,14 @@ def test_a_record_that_is_not_one_is_rerun_and_skipped_by_the_report(tmp_path, c
     assert err[1:] == [f"ddfbench.report: {tmp_path / 'out'}: no run records: nothing written"]
     assert not os.path.exists(tmp_path / "rep")
     assert runner.run(cfg)["status"] == "ok" and is_done(path)  # the next launch runs it
+    stray = tmp_path / "out" / "single" / "stray" / "record.json"
+    stray.parent.mkdir()
+    stray.write_text(json.dumps(content))
+    from ddfbench.report import status
+
+    monkeypatch.setattr(status, "expected_grid", lambda *args: ([], "a sweep"))  # as if a sweep had written them
+    assert report_main([str(tmp_path / "out" / "single"), "--out", str(tmp_path / "rep"), "--plots", "none"]) == 0
+    assert capsys.readouterr().err.count(f"skipped {stray}") == 1  # said once, though the sweep status reads it too
 
 
 # ---- forced reruns -----------------------------------------------------------------------------------

@@ -67,15 +67,16 @@ def _experiment_file(records: list[dict[str, Any]], experiment: str) -> str:
     return files.most_common(1)[0][0] if files else experiment
 
 
-def _sweep_lines(records_dir: str, sweep: list[str] | None) -> list[str]:
+def _sweep_lines(records_dir: str, sweep: list[str] | None, records: list[dict[str, Any]]) -> list[str]:
     """The sweep's status (done / failed / missing), or one line saying why it is unknown.
-    sweep: the sweep's overrides (default: the newest sweep of this experiment, see status.py)."""
+    sweep: the sweep's overrides (default: the newest sweep of this experiment, see status.py); records: those
+    read from records_dir."""
     try:
         from ddfbench.report import status
     except ImportError:
         return []
     try:
-        st = status.sweep_status(records_dir, sweep)
+        st = status.sweep_status(records_dir, sweep, records)
     except Exception as exc:  # the status is an extra: a report is still written without it
         return [f"Sweep status unknown ({type(exc).__name__}: {str(exc).strip().splitlines()[0] if str(exc) else ''})."]
     return ["```", status.format_status(records_dir, st), "```"]
@@ -158,7 +159,8 @@ def write_report(source: str, out_dir: str, note: str | None = None,
                    "allow_mixed_commits": allow_mixed_commits}, fh, indent=1)
         fh.write("\n")
     if os.path.isdir(source):  # the machine's paths are written as <out_dir>, the folder above the records
-        text = "\n".join(["# Sweep status when the report was written", ""] + _sweep_lines(source, sweep)) + "\n"
+        text = "\n".join(["# Sweep status when the report was written", "", *_sweep_lines(source, sweep, records)])
+        text += "\n"
         with open(os.path.join(out_dir, STATUS_FILE), "w") as fh:
             fh.write(text.replace(os.path.dirname(os.path.abspath(source)), "<out_dir>"))
     md = to_markdown(df)

@@ -151,11 +151,15 @@ def compose_job(loader: Any, master: DictConfig, overrides: list[str]) -> tuple[
     return plugins.job_config(cfg, choices), choices
 
 
-def sweep_status(records_dir: str, overrides: list[str] | None = None) -> SweepStatus:
-    """Match the expected grid against the records found anywhere below records_dir."""
+def sweep_status(records_dir: str, overrides: list[str] | None = None,
+                 records: list[dict[str, Any]] | None = None) -> SweepStatus:
+    """Match the expected grid against the records found anywhere below records_dir (or `records`, already read
+    from there: their problems are said once)."""
     jobs, source = expected_grid(records_dir, list(overrides or []))
     found: dict[str, dict[str, Any]] = {}
-    for rec in runs.find_records(records_dir) if os.path.isdir(records_dir) else []:
+    if records is None:
+        records = runs.find_records(records_dir) if os.path.isdir(records_dir) else []
+    for rec in records:
         if rec.get("status") == "ok" or rec.get("key") not in found:  # an ok copy wins over a failed one
             found[str(rec.get("key"))] = rec
     status = SweepStatus(source=source, expected=jobs)
