@@ -3,6 +3,8 @@
 import numpy as np
 import pytest
 import torch
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from ddfbench.core.errors import InputError
 from ddfbench.core.geometry import grid_points
@@ -154,6 +156,35 @@ def test_infinite_cells_alone_across_the_level_mesh_as_their_pocket(sign):
     r = np.linalg.norm(mesh.vertices, axis=1)
     assert not info["empty"] and info["nonfinite"] == (np.isnan(values).sum())
     assert 0.25 < r.min() and r.max() < 0.3 + 0.6 / 32  # the pocket's wall, between its nodes and the next ones
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.lists(st.one_of(st.floats(-50, 50, width=32), st.sampled_from([np.inf, -np.inf, np.nan])),
+                min_size=8, max_size=8), st.floats(-5, 5, width=32))
+def test_a_field_marching_cubes_took_before_is_clipped_as_before(cells, level):
+    """The bounds for infinite cells moved only where they lay on the wrong side of the level (marching cubes
+    raised): every other field gets the bounds of the float32 arithmetic it always had, to the bit."""
+    values = np.asarray(cells, np.float32).reshape(2, 2, 2)
+    values = np.where(np.isnan(values), np.inf, values)
+    finite = values[np.isfinite(values)]
+    if finite.size == 0 or not values.min() < level < values.max():
+        return
+    span = float(finite.max() - finite.min()) + abs(level) + 1.0
+    before = np.clip(values, finite.min() - span, finite.max() + span)  # 4d2b6f9's bounds
+    if not before.min() <= level <= before.max():  # marching cubes refused it: the case that changed
+        return
+    seen, real = [], extract.measure.marching_cubes
+
+    def capture(volume, **kwargs):
+        seen.append(volume.copy())
+        return real(volume, **kwargs)
+
+    extract.measure.marching_cubes = capture
+    try:
+        field_to_mesh(values, 0.6, level)
+    finally:
+        extract.measure.marching_cubes = real
+    assert np.array_equal(seen[0], before)
 
 
 def test_bad_arguments_raise_input_errors():

@@ -150,3 +150,22 @@ def test_a_writer_that_fails_midway_leaves_the_old_file_and_no_temporary(tmp_pat
     mask = os.umask(0)
     os.umask(mask)
     assert oct(os.stat(path).st_mode & 0o777) == oct(0o666 & ~mask)  # not mkstemp's 0600
+
+
+def test_a_filesystem_that_refuses_modes_still_gets_the_file_and_a_killed_write_s_temporary_is_found(tmp_path,
+                                                                                                     monkeypatch):
+    from ddfbench.core import atomic
+    from ddfbench.fit.checkpoint import Checkpoint
+
+    def refuse(fd, mode):
+        raise PermissionError(1, "Operation not permitted")
+
+    monkeypatch.setattr(atomic.os, "fchmod", refuse)
+    path = tmp_path / "fit_checkpoint.pt"
+    atomic.write_atomic(str(path), lambda fh: fh.write(b"state"), "wb")
+    assert path.read_bytes() == b"state" and os.listdir(tmp_path) == ["fit_checkpoint.pt"]
+    killed = tmp_path / ".fit_checkpoint.pt.x1y2z3.tmp"  # what a save killed mid-write leaves
+    killed.write_bytes(b"half")
+    assert atomic.leftovers(str(path)) == [str(killed)]
+    Checkpoint(str(path)).remove()
+    assert os.listdir(tmp_path) == []

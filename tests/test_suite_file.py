@@ -284,12 +284,22 @@ def test_a_file_changed_only_by_result_neutral_commits_is_not_stale(monkeypatch,
     git("commit", "-qm", "ran")
     ran = git("rev-parse", "HEAD")
     monkeypatch.setattr(suite, "ROOT", str(tmp_path))
+    monkeypatch.setattr(suite, "CONF_DIR", str(tmp_path / "conf"))
     entry, recs = suite.Entry("default", "reports/default"), [record(ran, "mesh", "mesh")]
-    neutral = {commit("an atomic writer")[:7]: "writes the same bytes"}
+    atomic = commit("an atomic writer")
+    (tmp_path / "conf" / "suite").mkdir(parents=True)
+    (tmp_path / "conf" / "suite" / "s.yaml").write_text(f"result_neutral: {{'{atomic[:7]}': writes the same bytes}}")
+    neutral = suite.load_neutral("s")
+    assert neutral == {atomic: "writes the same bytes"}  # an abbreviation, resolved
     assert suite.stale(entry, recs) == (ran[:7], ["ddfbench/run/runner.py"])
     assert suite.stale(entry, recs, neutral) == (ran[:7], [])
     commit("a new loss")
     assert suite.stale(entry, recs, neutral) == (ran[:7], ["ddfbench/run/runner.py"])
+    git("checkout", "-q", "-b", "side", ran)  # records of a commit that is not an ancestor of HEAD: its own change
+    side = commit("a change of the side branch")  # is in the difference, whatever HEAD's commits were
+    git("checkout", "-q", "-")
+    git("reset", "-q", "--hard", atomic)
+    assert suite.stale(entry, [record(side, "mesh", "mesh")], neutral) == (side[:7], ["ddfbench/run/runner.py"])
 
 
 def test_a_malformed_result_neutral_entry_is_one_line_naming_it(monkeypatch, tmp_path):
@@ -300,6 +310,9 @@ def test_a_malformed_result_neutral_entry_is_one_line_naming_it(monkeypatch, tmp
         suite.load_neutral("s")
     (tmp_path / "suite" / "s.yaml").write_text("result_neutral: {abcdef0: ''}\n")
     with pytest.raises(InputError, match=r"result_neutral.abcdef0: needs a commit .* and why"):
+        suite.load_neutral("s")
+    (tmp_path / "suite" / "s.yaml").write_text("result_neutral: {'0000000': same}\n")
+    with pytest.raises(InputError, match=r"^conf/suite/s.yaml: result_neutral.0000000: not a commit of this clone$"):
         suite.load_neutral("s")
     (tmp_path / "suite" / "s.yaml").write_text("tiers: {}\n")
     assert suite.load_neutral("s") == {}

@@ -7,6 +7,8 @@ nothing of ddfbench, so any layer may use it.
 
 from __future__ import annotations
 
+import contextlib
+import glob
 import os
 import tempfile
 from typing import IO, Any, Callable
@@ -28,8 +30,9 @@ def write_atomic(path: str, write: Callable[[IO[Any]], None], mode: str = "w") -
     output (0666 less the umask; mkstemp alone makes it 0600)."""
     fd, tmp = tempfile.mkstemp(prefix=f".{os.path.basename(path)}.", suffix=".tmp", dir=os.path.dirname(path) or ".")
     try:
-        os.fchmod(fd, 0o666 & ~UMASK)
         with os.fdopen(fd, mode) as fh:
+            with contextlib.suppress(OSError):  # a filesystem without modes (some network mounts) keeps mkstemp's
+                os.fchmod(fh.fileno(), 0o666 & ~UMASK)
             write(fh)
             fh.flush()
             os.fsync(fh.fileno())
@@ -39,3 +42,9 @@ def write_atomic(path: str, write: Callable[[IO[Any]], None], mode: str = "w") -
             os.unlink(tmp)
         raise
     return path
+
+
+def leftovers(path: str) -> list[str]:
+    """The temporary files of write_atomic(path, ...) calls that were killed before they could remove them."""
+    folder, name = os.path.split(path)
+    return glob.glob(os.path.join(glob.escape(folder or "."), f".{glob.escape(name)}.*.tmp"))

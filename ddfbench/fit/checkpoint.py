@@ -35,7 +35,7 @@ from typing import Any, Mapping
 import numpy as np
 import torch
 
-from ddfbench.core.atomic import write_atomic
+from ddfbench.core.atomic import leftovers, write_atomic
 
 log = logging.getLogger(__name__)
 
@@ -107,7 +107,7 @@ class Checkpoint:
     def remove(self) -> None:
         """Delete the checkpoint, those set aside and any temporary file a killed save left."""
         stem = glob.escape(self.path)
-        for path in (self.path, *glob.glob(f"{stem}.*.tmp"), *glob.glob(f"{stem}.*.pt")):
+        for path in (self.path, *leftovers(self.path), *glob.glob(f"{stem}.*.tmp"), *glob.glob(f"{stem}.*.pt")):
             if os.path.exists(path):
                 os.remove(path)
 

@@ -11,7 +11,8 @@ protocol's confirmation on fresh seeds, from the records), then writes its repor
 job failed); with --from-reports it first restores the reports' committed records into the results folder, so that a
 tier resumes across machines. `status` says, per report, the code commit its records come from and whether the code or
 config of a model it ran changed since (stale), by `git diff` (the modules that write nothing into a record,
-RESULT_NEUTRAL, left out).
+RESULT_NEUTRAL, left out, and a file whose every change since is a commit the suite file lists as `result_neutral`).
+Every suite command needs a git checkout: it reads and writes the checkout's committed reports/.
 """
 
 from __future__ import annotations
@@ -38,7 +39,7 @@ from ddfbench.report.status import compose_job, sweep_jobs
 from ddfbench.run import runs
 from ddfbench.run.checks import check_conf_found
 
-ROOT = os.path.dirname(CONF_DIR)
+ROOT = os.path.dirname(os.path.realpath(CONF_DIR))  # the checkout (an installed wheel: its package folder)
 # experiment: its records -> the overrides of each sweep its report still needs (run into the same out_dir)
 FOLLOW_UPS = {"tune_finalists": finalists.confirmation_sweeps}
 
@@ -354,8 +355,9 @@ RESULT_NEUTRAL = ("ddfbench/run/checks.py", "ddfbench/run/overrides.py", "ddfben
 
 
 def load_neutral(name: str) -> dict[str, str]:
-    """{commit: why} of conf/suite/<name>.yaml's `result_neutral`: commits that changed code of the stale scope but
-    no measured value of a run; a one-line InputError naming the file and key when malformed."""
+    """{full commit hash: why} of conf/suite/<name>.yaml's `result_neutral`: commits that changed code of the stale
+    scope but no measured value of a run; a one-line InputError naming the file and key when malformed or not a
+    commit of this clone."""
     spec = OmegaConf.to_container(OmegaConf.load(os.path.join(CONF_DIR, "suite", f"{name}.yaml"))) or {}
     neutral = spec.get("result_neutral") or {}  # type: ignore[union-attr]
     where = f"conf/suite/{name}.yaml: result_neutral"
@@ -365,15 +367,25 @@ def load_neutral(name: str) -> dict[str, str]:
         if not re.fullmatch(r"[0-9a-f]{7,40}", str(commit)) or not isinstance(why, str) or not why.strip():
             raise InputError(f"{where}.{commit}: needs a commit (7 to 40 hex digits) and why it changes no "
                              "measured value")
-    return {str(c): str(w) for c, w in neutral.items()}
+    out = {}
+    for commit, why in neutral.items():
+        full = subprocess.run(["git", "-C", ROOT, "rev-parse", "--verify", "-q", f"{commit}^{{commit}}"],
+                              capture_output=True, text=True)
+        if full.returncode != 0:
+            raise InputError(f"{where}.{commit}: not a commit of this clone")
+        out[full.stdout.strip()] = str(why)
+    return out
 
 
 def _only_neutral_commits(since: str, path: str, neutral: dict[str, str]) -> bool:
-    """Whether every commit after `since` that touched path is one of the result-neutral ones."""
+    """Whether every commit after `since` that touched path is one of the result-neutral ones (full hashes). Only
+    where `since` is an ancestor of HEAD: else the difference holds changes of since's side, which no list of HEAD's
+    commits covers."""
+    ancestor = subprocess.run(["git", "-C", ROOT, "merge-base", "--is-ancestor", since, "HEAD"], capture_output=True)
     log = subprocess.run(["git", "-C", ROOT, "log", "--format=%H", f"{since}..HEAD", "--", path],
                          capture_output=True, text=True)
     commits = log.stdout.split()
-    return log.returncode == 0 and bool(commits) and all(any(c.startswith(n) for n in neutral) for c in commits)
+    return ancestor.returncode == 0 == log.returncode and bool(commits) and all(c in neutral for c in commits)
 
 
 def stale(entry: Entry, records: list[dict[str, Any]],
@@ -438,7 +450,7 @@ def status(suite: str) -> int:
                      "records that name no code commit" if recs else "no records committed")
                   + (f"; changed since: {', '.join(changed[:4])}{' ...' if len(changed) > 4 else ''}" if changed else ""))
     for commit, why in neutral.items():
-        print(f"not counted, result-neutral (conf/suite/{suite}.yaml): {commit}: {why}")
+        print(f"not counted, result-neutral (conf/suite/{suite}.yaml): {commit[:7]}: {why}")
     return worst
 
 
