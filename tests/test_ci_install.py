@@ -37,3 +37,29 @@ def test_every_dependency_and_extra_is_pinned_for_ci():
     assert pinned["torch"].startswith("2.13.0")  # the machine's CPU build, installed by pip before the rest
     with open(os.path.join(ROOT, ".ci", "run")) as fh:
         assert "-c .ci/constraints.txt" in fh.read()
+
+
+@pytest.mark.slow
+def test_the_wheel_carries_every_config_so_an_install_runs_from_any_folder(tmp_path):
+    """`pip install .` builds a wheel: ddfbench/conf (in a checkout a link to conf/) must arrive as files."""
+    import shutil
+    import subprocess
+    import sys
+    import zipfile
+
+    source = tmp_path / "source"  # a copy of what the build reads: it leaves build/ in the tree it builds
+    shutil.copytree(os.path.join(ROOT, "ddfbench"), source / "ddfbench", symlinks=True,
+                    ignore=shutil.ignore_patterns("__pycache__"))
+    shutil.copytree(os.path.join(ROOT, "conf"), source / "conf")
+    for name in ("pyproject.toml", "README.md", "LICENSE"):
+        shutil.copy(os.path.join(ROOT, name), source)
+    built = subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "--no-build-isolation", "-q",
+                            "-w", str(tmp_path / "dist"), str(source)], capture_output=True, text=True, timeout=300)
+    assert built.returncode == 0, built.stderr[-2000:]
+    (wheel,) = (tmp_path / "dist").glob("ddfbench-*.whl")
+    carried = {name for name in zipfile.ZipFile(wheel).namelist() if name.startswith("ddfbench/conf/")}
+    conf = os.path.join(ROOT, "conf")
+    wanted = {f"ddfbench/conf/{os.path.relpath(os.path.join(d, f), conf)}" for d, _, files in os.walk(conf)
+              for f in files if f.endswith(".yaml")}
+    assert len(wanted) > 50 and carried == wanted
+    assert os.path.realpath(os.path.join(ROOT, "ddfbench", "conf")) == os.path.realpath(conf)

@@ -154,17 +154,18 @@ def test_a_value_the_experiment_s_level_would_replace_stops_the_command_and_capa
     assert rec["status"] == "ok" and rec["fit"]["steps"] == 5
 
 
-def test_a_package_without_its_configs_says_in_one_line_that_it_runs_from_a_checkout(tmp_path):
-    """A wheel installed elsewhere carries ddfbench/ but not conf/: each command names what it needs, no traceback."""
+def test_a_package_without_its_configs_says_so_in_one_line(tmp_path):
+    """A copy of the package without its conf/ (a broken install): each command names what is missing, no
+    traceback."""
     import shutil
 
     import ddfbench
 
     shutil.copytree(os.path.dirname(ddfbench.__file__), tmp_path / "ddfbench",
-                    ignore=shutil.ignore_patterns("__pycache__"))
+                    ignore=shutil.ignore_patterns("__pycache__", "conf"))
     env = {**os.environ, "PYTHONPATH": str(tmp_path), "OMP_NUM_THREADS": "1"}
-    line = (f"{tmp_path / 'conf'}: no configs there: ddfbench runs from a source checkout, whose conf/ lies beside "
-            "the package (git clone the repository, then pip install -e . in it)")
+    line = (f"{tmp_path / 'ddfbench' / 'conf'}: no configs there: install ddfbench with them (pip install . from a "
+            "checkout, whose ddfbench/conf links its conf/)")
     for args in (["ddfbench", "--help"], ["ddfbench.suite", "status", "v1"], ["ddfbench.report", str(tmp_path)]):
         done = subprocess.run([sys.executable, "-m", *args], cwd=tmp_path, env=env, capture_output=True, text=True)
         assert (done.returncode, done.stderr) == (1 if args[0] == "ddfbench" else 2, f"{args[0]}: {line}\n")

@@ -22,8 +22,9 @@ from omegaconf import OmegaConf
 
 from ddfbench.core.errors import InputError
 
-# Hydra configs live in conf/ at the top level of the repository (next to the package).
-CONF_DIR = os.path.join(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))), "conf")
+# Hydra configs: the package's conf/, in a checkout a link to conf/ at the top of the repository (a wheel carries
+# them as files there)
+CONF_DIR = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "conf")
 
 META_KEY = "experiments"  # the part of a plugin's YAML that is about experiments, not its config
 LEVEL_KEYS = {"model": "capacity", "sampling": "sample_size"}  # group -> the job key that picks a level

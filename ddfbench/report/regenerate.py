@@ -208,7 +208,7 @@ def main(argv: list[str] | None = None) -> int:
         readme = args.readme or os.path.join(os.path.dirname(os.path.abspath(args.reports)), "README.md")
         return from_records(args.reports, args.check, readme)
     experiments = args.only.split(",") if args.only else list(EXPERIMENTS)
-    conf = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "conf", "experiment")
+    conf = os.path.join(plugins.CONF_DIR, "experiment")
     unknown = [e for e in experiments if not os.path.isfile(os.path.join(conf, f"{e}.yaml"))]
     if unknown:
         print(f"ddfbench.report.regenerate: --only {','.join(unknown)}: no conf/experiment/<name>.yaml", file=sys.stderr)

@@ -54,11 +54,11 @@ def writable_folder(path: str, named: str) -> None:
 
 
 def check_conf_found() -> None:
-    """ddfbench reads its Hydra configs from conf/ beside the package, where a source checkout has them (`pip
-    install -e .`); a one-line InputError where they are not (a wheel installed elsewhere carries none)."""
+    """ddfbench reads its Hydra configs from the package's conf/ (a checkout links it to its top-level conf/, a wheel
+    carries it); a one-line InputError where they are missing (a copy of the package alone, a broken install)."""
     if not os.path.isfile(os.path.join(plugins.CONF_DIR, "config.yaml")):
-        raise InputError(f"{plugins.CONF_DIR}: no configs there: ddfbench runs from a source checkout, whose conf/ "
-                         "lies beside the package (git clone the repository, then pip install -e . in it)")
+        raise InputError(f"{plugins.CONF_DIR}: no configs there: install ddfbench with them (pip install . from a "
+                         "checkout, whose ddfbench/conf links its conf/)")
 
 
 @functools.lru_cache(maxsize=None)

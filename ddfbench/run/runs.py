@@ -167,8 +167,12 @@ def code_commits(records: list[dict[str, Any]]) -> list[str]:
 
 
 def _git(*args: str) -> str | None:
+    """git's answer in the checkout that holds the package; None in an installed wheel (whose folder may lie inside
+    another repository, whose commit is not ddfbench's) or where git fails."""
+    root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    if not os.path.exists(os.path.join(root, ".git")):
+        return None
     try:
-        root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
         out = subprocess.run(["git", *args], cwd=root, capture_output=True, text=True, timeout=5)
         return out.stdout.strip() or None
     except (OSError, subprocess.SubprocessError):
