@@ -61,9 +61,10 @@ def test_misspelt_override_ends_the_run_with_one_line(tmp_path):
 
 
 def _copy_tree(root):
-    """The package and conf/ copied under root, with grid_copy (a family) and random_copy (a sampler) added."""
+    """The package (its conf link kept: it reads the copy) and conf/ copied under root, with grid_copy (a family) and
+    random_copy (a sampler) added."""
     ignore = shutil.ignore_patterns("__pycache__")
-    shutil.copytree(os.path.join(PACKAGE_DIR, "ddfbench"), root / "ddfbench", ignore=ignore)
+    shutil.copytree(os.path.join(PACKAGE_DIR, "ddfbench"), root / "ddfbench", ignore=ignore, symlinks=True)
     shutil.copytree(CONF_DIR, root / "conf", ignore=ignore)
     pkg, conf = root / "ddfbench", root / "conf"
     family = (pkg / "models" / "grid_sdf.py").read_text()
