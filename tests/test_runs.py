@@ -89,6 +89,17 @@ def test_environment_records_optional_package_versions_whatever_was_imported(mon
     assert environment("cpu", 1)["versions"]["open3d"] is None
 
 
+def test_environment_names_the_cpu_model_and_ddfbench_s_version(tmp_path):
+    import ddfbench
+
+    info = tmp_path / "cpuinfo"
+    info.write_text("processor\t: 0\nvendor_id\t: AuthenticAMD\nmodel name\t: AMD EPYC 9B14 96-Core Processor\n"
+                    "processor\t: 1\nmodel name\t: AMD EPYC 9B14 96-Core Processor\n")
+    assert runs.cpu_model(str(info)) == "AMD EPYC 9B14 96-Core Processor"
+    assert runs.cpu_model(str(tmp_path / "none")) is None and runs.cpu_model(os.devnull) is None
+    assert runs.environment("cpu", 1)["versions"]["ddfbench"] == ddfbench.__version__
+
+
 def test_a_copied_tree_names_its_commit_through_the_environment(monkeypatch):
     """A lent GPU machine gets the working tree over a stale .git (or none): $DDFBENCH_GIT_SHA names the commit."""
     from ddfbench.run import runs

@@ -217,22 +217,36 @@ def _providers() -> dict[str, list[str]]:
     return metadata.packages_distributions()
 
 
+def cpu_model(cpuinfo: str = "/proc/cpuinfo") -> str | None:
+    """The processor's model name as Linux names it (its first `model name` line), else None: timings are comparable
+    within one model, and `cpu` holds only the architecture."""
+    try:
+        with open(cpuinfo, encoding="utf-8", errors="replace") as fh:
+            return next((line.split(":", 1)[1].strip() for line in fh if line.startswith("model name")), None)
+    except OSError:
+        return None
+
+
 def environment(device: str, threads: int) -> dict[str, Any]:
     """Where and with what the run was measured."""
     import numpy
     import torch
     import trimesh
 
+    import ddfbench
+
     gpu = torch.cuda.get_device_name(0) if device.startswith("cuda") and torch.cuda.is_available() else None
     return {
         "git_sha": _git_sha(),
         "code_sha": code_sha(),
         "git_sha_from": GIT_SHA_ENV if os.environ.get(GIT_SHA_ENV) else "git",
-        "versions": {"python": platform.python_version(), "torch": torch.__version__, "numpy": numpy.__version__,
-                     "trimesh": trimesh.__version__, **{name: _installed(name) for name in OPTIONAL}},
+        "versions": {"ddfbench": ddfbench.__version__, "python": platform.python_version(), "torch": torch.__version__,
+                     "numpy": numpy.__version__, "trimesh": trimesh.__version__,
+                     **{name: _installed(name) for name in OPTIONAL}},
         "device": device,
         "threads": int(threads),
         "cpu": platform.processor() or platform.machine(),
+        "cpu_model": cpu_model(),
         "cpu_count": os.cpu_count(),
         "gpu": gpu,
         "hostname": socket.gethostname(),
