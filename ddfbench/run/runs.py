@@ -233,14 +233,13 @@ def environment(device: str, threads: int) -> dict[str, Any]:
     import torch
     import trimesh
 
-    import ddfbench
-
+    version = sys.modules[__name__.split(".")[0]].__version__  # the package, imported before any of its modules
     gpu = torch.cuda.get_device_name(0) if device.startswith("cuda") and torch.cuda.is_available() else None
     return {
         "git_sha": _git_sha(),
         "code_sha": code_sha(),
         "git_sha_from": GIT_SHA_ENV if os.environ.get(GIT_SHA_ENV) else "git",
-        "versions": {"ddfbench": ddfbench.__version__, "python": platform.python_version(), "torch": torch.__version__,
+        "versions": {"ddfbench": version, "python": platform.python_version(), "torch": torch.__version__,
                      "numpy": numpy.__version__, "trimesh": trimesh.__version__,
                      **{name: _installed(name) for name in OPTIONAL}},
         "device": device,
