@@ -343,3 +343,18 @@ def test_a_record_is_readable_like_every_other_output(tmp_path):
     record = os.stat(runs.record_path(str(tmp_path / "out"), "single", rec["key"])).st_mode
     mesh = os.stat(os.path.join(tmp_path / "out", "single", rec["key"], "gt_mesh.ply")).st_mode
     assert stat.S_IMODE(record) == stat.S_IMODE(mesh) == 0o644
+
+
+def test_a_checkout_without_symlinks_is_told_how_to_get_its_configs(tmp_path, monkeypatch):
+    from ddfbench.core import plugins
+    from ddfbench.run.checks import check_conf_found
+
+    link = tmp_path / "conf"
+    link.write_text("../conf")  # what git writes for the link where core.symlinks is false
+    monkeypatch.setattr(plugins, "CONF_DIR", str(link))
+    with pytest.raises(InputError, match=r"conf: a file, not the link to conf/: this checkout was made without "
+                                         r"symlinks \(git config core.symlinks true"):
+        check_conf_found()
+    link.unlink()
+    with pytest.raises(InputError, match=r"conf: no configs there: install ddfbench with them"):
+        check_conf_found()

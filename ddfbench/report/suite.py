@@ -356,8 +356,8 @@ RESULT_NEUTRAL = ("ddfbench/run/checks.py", "ddfbench/run/overrides.py", "ddfben
 
 def load_neutral(name: str) -> dict[str, str]:
     """{full commit hash: why} of conf/suite/<name>.yaml's `result_neutral`: commits that changed code of the stale
-    scope but no measured value of a run; a one-line InputError naming the file and key when malformed or not a
-    commit of this clone."""
+    scope but no measured value of a run; a one-line InputError naming the file and key when malformed. An entry that
+    is not a commit of this clone (a shallow one) is left out with a line on stderr: it counts for nothing."""
     spec = OmegaConf.to_container(OmegaConf.load(os.path.join(CONF_DIR, "suite", f"{name}.yaml"))) or {}
     neutral = spec.get("result_neutral") or {}  # type: ignore[union-attr]
     where = f"conf/suite/{name}.yaml: result_neutral"
@@ -372,7 +372,9 @@ def load_neutral(name: str) -> dict[str, str]:
         full = subprocess.run(["git", "-C", ROOT, "rev-parse", "--verify", "-q", f"{commit}^{{commit}}"],
                               capture_output=True, text=True)
         if full.returncode != 0:
-            raise InputError(f"{where}.{commit}: not a commit of this clone")
+            print(f"ddfbench.suite: {where}.{commit}: not a commit of this clone (a shallow clone?): not counted",
+                  file=sys.stderr)
+            continue
         out[full.stdout.strip()] = str(why)
     return out
 

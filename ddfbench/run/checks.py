@@ -56,6 +56,9 @@ def writable_folder(path: str, named: str) -> None:
 def check_conf_found() -> None:
     """ddfbench reads its Hydra configs from the package's conf/ (a checkout links it to its top-level conf/, a wheel
     carries it); a one-line InputError where they are missing (a copy of the package alone, a broken install)."""
+    if os.path.isfile(plugins.CONF_DIR):  # the link checked out as a text file
+        raise InputError(f"{plugins.CONF_DIR}: a file, not the link to conf/: this checkout was made without "
+                         "symlinks (git config core.symlinks true, then git checkout -- ddfbench/conf)")
     if not os.path.isfile(os.path.join(plugins.CONF_DIR, "config.yaml")):
         raise InputError(f"{plugins.CONF_DIR}: no configs there: install ddfbench with them (pip install . from a "
                          "checkout, whose ddfbench/conf links its conf/)")
