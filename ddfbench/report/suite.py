@@ -37,7 +37,7 @@ from ddfbench.core.plugins import CONF_DIR
 from ddfbench.report import compact, finalists
 from ddfbench.report.status import compose_job, sweep_jobs
 from ddfbench.run import runs
-from ddfbench.run.checks import check_conf_found
+from ddfbench.run.checks import check_conf_found, writable_folder
 
 ROOT = os.path.dirname(os.path.realpath(CONF_DIR))  # the checkout (an installed wheel: its package folder)
 # experiment: its records -> the overrides of each sweep its report still needs (run into the same out_dir)
@@ -267,8 +267,6 @@ def run(suite: str, tier: str, results: str, extra: list[str] | None = None, fro
     each report's committed records into results/ (compact.restore), so that a tier cut short on another machine goes
     on where its committed records end (the report refuses records of two code commits: run it from the records'
     commit). only: the tier's experiments to run (default: all)."""
-    from ddfbench.run.checks import writable_folder
-
     entries = tier_entries(suite, tier, only)
     writable_folder(results, "--results ")
     committed = {e.report: os.path.join(ROOT, e.report, compact.FILE) for e in entries}
@@ -363,12 +361,11 @@ def load_neutral(name: str) -> dict[str, str]:
     where = f"conf/suite/{name}.yaml: result_neutral"
     if not isinstance(neutral, dict):
         raise InputError(f"{where}: needs {{commit: why the commit changes no measured value}}")
+    out = {}
     for commit, why in neutral.items():
         if not re.fullmatch(r"[0-9a-f]{7,40}", str(commit)) or not isinstance(why, str) or not why.strip():
             raise InputError(f"{where}.{commit}: needs a commit (7 to 40 hex digits) and why it changes no "
                              "measured value")
-    out = {}
-    for commit, why in neutral.items():
         full = subprocess.run(["git", "-C", ROOT, "rev-parse", "--verify", "-q", f"{commit}^{{commit}}"],
                               capture_output=True, text=True)
         if full.returncode != 0:
@@ -380,14 +377,11 @@ def load_neutral(name: str) -> dict[str, str]:
 
 
 def _only_neutral_commits(since: str, path: str, neutral: dict[str, str]) -> bool:
-    """Whether every commit after `since` that touched path is one of the result-neutral ones (full hashes). Only
-    where `since` is an ancestor of HEAD: else the difference holds changes of since's side, which no list of HEAD's
-    commits covers."""
-    ancestor = subprocess.run(["git", "-C", ROOT, "merge-base", "--is-ancestor", since, "HEAD"], capture_output=True)
+    """Whether every commit after `since` that touched path is one of the result-neutral ones (full hashes)."""
     log = subprocess.run(["git", "-C", ROOT, "log", "--format=%H", f"{since}..HEAD", "--", path],
                          capture_output=True, text=True)
     commits = log.stdout.split()
-    return ancestor.returncode == 0 == log.returncode and bool(commits) and all(c in neutral for c in commits)
+    return log.returncode == 0 and bool(commits) and all(c in neutral for c in commits)
 
 
 def stale(entry: Entry, records: list[dict[str, Any]],
@@ -416,8 +410,12 @@ def stale(entry: Entry, records: list[dict[str, Any]],
                               capture_output=True, text=True)
         if done.returncode != 0:
             return ", ".join(s[:7] for s in shas), [f"commit {sha[:7]} is not in this clone"]
+        # neutral commits count only where sha is an ancestor of HEAD: else the difference holds changes of sha's
+        # side, which no list of HEAD's commits covers
+        ancestor = neutral and subprocess.run(["git", "-C", ROOT, "merge-base", "--is-ancestor", sha, "HEAD"],
+                                              capture_output=True).returncode == 0
         changed += [path for path in done.stdout.split() if not _only_membership_changed(sha, path)
-                    and not (neutral and _only_neutral_commits(sha, path, neutral))]
+                    and not (ancestor and _only_neutral_commits(sha, path, neutral))]
     return ", ".join(s[:7] for s in shas), sorted(set(changed))
 
 
