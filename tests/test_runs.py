@@ -180,3 +180,34 @@ def test_a_filesystem_that_refuses_modes_still_gets_the_file_and_a_killed_write_
     assert atomic.leftovers(str(path)) == [str(killed)]
     Checkpoint(str(path)).remove()
     assert os.listdir(tmp_path) == []
+
+
+@pytest.mark.parametrize("family", ["ddf", "neural_sdf", "gan_sdf", "grid_sdf", "mesh"])
+def test_a_model_save_that_cannot_reach_the_disk_keeps_the_old_artifact_and_leaves_no_temporary(family, tmp_path,
+                                                                                                monkeypatch):
+    import numpy as np
+    import trimesh
+
+    from ddfbench.core import atomic
+    from ddfbench.models import available_families, load_family
+
+    if family not in available_families():
+        pytest.skip(f"no {family} family in this checkout")
+    rep = load_family(family)({"resolution": 4} if family == "grid_sdf" else {"faces": 0} if family == "mesh" else {},
+                              0.7)
+    if family == "grid_sdf":
+        rep._set_grid(np.zeros((4, 4, 4), np.float32))
+    if family == "mesh":
+        rep.mesh = trimesh.creation.box()
+    path = rep.save(str(tmp_path / "model"))
+    old = open(path, "rb").read()
+
+    def full(fd):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(atomic.os, "fsync", full)  # every artifact is synced before it replaces the old one
+    if family == "grid_sdf":
+        rep._set_grid(np.ones((4, 4, 4), np.float32))
+    with pytest.raises(OSError, match="No space left"):
+        rep.save(str(tmp_path / "model"))
+    assert open(path, "rb").read() == old and os.listdir(tmp_path) == [os.path.basename(path)]

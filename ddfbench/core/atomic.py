@@ -1,8 +1,9 @@
 """Files written whole or not at all: a reader, or a process killed midway, finds the old file or the whole new one.
 
 `write_atomic` fills a temporary file beside the target, syncs it to disk and renames it over the target. Run
-records, datasets, fit checkpoints, compact records and bench tables are written through it. This module imports
-nothing of ddfbench, so any layer may use it.
+records, datasets, fit checkpoints, compact records, bench tables and mesh files are written through it;
+`write_atomic_named` does the same for writers that take only a file name (torch.save and np.savez: the model
+artifacts). This module imports nothing of ddfbench, so any layer may use it.
 """
 
 from __future__ import annotations
@@ -36,6 +37,25 @@ def write_atomic(path: str, write: Callable[[IO[Any]], None], mode: str = "w") -
             write(fh)
             fh.flush()
             os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+    return path
+
+
+def write_atomic_named(path: str, tmp: str, write: Callable[[str], None]) -> str:
+    """Like write_atomic for a writer that takes a file name: write(tmp) fills tmp (the caller names it beside
+    path: torch.save stores the name in its archive, so the name keeps the bytes), which is fsynced and renamed
+    over path; return path. A failure removes tmp and raises."""
+    try:
+        write(tmp)
+        fd = os.open(tmp, os.O_RDONLY)
+        try:
+            os.fsync(fd)
+        finally:
+            os.close(fd)
         os.replace(tmp, path)
     except BaseException:
         if os.path.exists(tmp):

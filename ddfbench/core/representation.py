@@ -18,6 +18,7 @@ import numpy as np
 import trimesh
 
 from ddfbench.core import plugins
+from ddfbench.core.atomic import write_atomic_named
 from ddfbench.core.errors import InputError
 from ddfbench.core.geometry import BOX_HALF
 
@@ -173,10 +174,10 @@ class Representation(abc.ABC):
             raise InputError(f"{cls.family} artifact {path}: saved with domain {stored}, loaded with domain {expected}")
         return stored
 
-    def _publish(self, tmp: str, path: str) -> str:
-        """Finish a save: rename the fully written temporary file onto path and remember it."""
-        os.replace(tmp, path)
-        self._saved_path = path
+    def _publish(self, path: str, tmp: str, write: Callable[[str], None]) -> str:
+        """Save by file name: write(tmp) fills the temporary file tmp, which is synced and renamed onto path
+        (write_atomic_named); remember path and return it."""
+        self._saved_path = write_atomic_named(path, tmp, write)
         return path
 
     def _save_network(self, path: str, state: Mapping[str, Any]) -> str:
@@ -187,9 +188,8 @@ class Representation(abc.ABC):
         if not path.endswith(".pt"):
             path = f"{path}.pt"
         header = {"family": self.family, "domain": self.domain, "cfg": self.cfg}
-        tmp = f"{path}.tmp{os.getpid()}"
-        torch.save({"header": json.dumps(header), "state_dict": dict(state)}, tmp)
-        return self._publish(tmp, path)
+        blob = {"header": json.dumps(header), "state_dict": dict(state)}
+        return self._publish(path, f"{path}.tmp{os.getpid()}", lambda tmp: torch.save(blob, tmp))
 
     @classmethod
     def _read_network(cls, path: str) -> tuple[dict[str, Any], dict[str, Any]]:

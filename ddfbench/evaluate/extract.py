@@ -84,7 +84,8 @@ def field_to_mesh(values: np.ndarray, domain: float, level: float):
     # marching cubes needs finite input: put +-inf just beyond the finite range (keeps the crossing), and beyond the
     # level where the infinite cells alone cross it (NaN pockets of a field wholly inside: the pockets' mesh)
     span = float(finite.max() - finite.min()) + abs(level) + 1.0
-    high, low = finite.max() + span, finite.min() - span  # float32, as the bounds have always been computed
+    high, low = finite.max() + span, finite.min() - span  # the field's dtype on numpy >= 2 (NEP 50), float64 on 1.x:
+    # the arithmetic these bounds always had on either
     values = np.clip(values, low if low <= level else level - span, high if high >= level else level + span)
     spacing = 2 * domain / (values.shape[0] - 1)
     verts, faces, _, _ = measure.marching_cubes(

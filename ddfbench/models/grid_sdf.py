@@ -97,9 +97,8 @@ class GridSDF(SDFFamily):
             path = f"{path}.npz"
         header = {"family": self.family, "domain": self.domain, "resolution": self.resolution, "dtype": self.dtype,
                   "build": self.build, "trace": dict(self.cfg["trace"])}
-        tmp = f"{path}.tmp{os.getpid()}.npz"
-        np.savez(tmp, sdf=self.grid, header=np.array(json.dumps(header)))
-        return self._publish(tmp, path)
+        return self._publish(path, f"{path}.tmp{os.getpid()}.npz",
+                             lambda tmp: np.savez(tmp, sdf=self.grid, header=np.array(json.dumps(header))))
 
     @classmethod
     def load(cls, path: str, domain: float | None = None) -> "GridSDF":

@@ -12,6 +12,7 @@ from typing import Any, Mapping
 import numpy as np
 import trimesh
 
+from ddfbench.core.atomic import write_atomic
 from ddfbench.core.errors import InputError
 from ddfbench.core.geometry import BOX_HALF
 from ddfbench.core.representation import Budget, FitData, FitStats, Hits, Probe, RayStatus, Representation
@@ -105,8 +106,7 @@ class MeshFamily(Representation):
     def save(self, path: str) -> str:
         if not path.endswith(".ply"):
             path = f"{path}.ply"
-        self.mesh.export(path, file_type="ply", encoding="binary")
-        self._saved_path = path
+        self._saved_path = write_atomic(path, lambda fh: self.mesh.export(fh, file_type="ply", encoding="binary"), "wb")
         return path
 
     @classmethod

@@ -20,6 +20,7 @@ import torch
 from filelock import FileLock
 
 from ddfbench.core import heap, plugins
+from ddfbench.core.atomic import write_atomic
 from ddfbench.core.errors import InputError, checked_int, first_line, one_line
 from ddfbench.core.geometry import BOX_HALF
 from ddfbench.core.representation import Budget, FitData, Representation
@@ -136,7 +137,8 @@ def _stages(cfg: Mapping[str, Any], rdir: str, device: str, seed: int, out: dict
     if rep.extract_info.get("capped"):
         out["flags"].append("extraction_capped")
     if len(rec.faces):
-        rec.export(os.path.join(rdir, "reconstruction.ply"), file_type="ply", encoding="binary")
+        write_atomic(os.path.join(rdir, "reconstruction.ply"),
+                     lambda fh: rec.export(fh, file_type="ply", encoding="binary"), "wb")
         artifacts["reconstruction"] = "reconstruction.ply"
 
     t0 = time.perf_counter()
