@@ -19,7 +19,7 @@ def rec(experiment, model, seed, chamfer, shape="bunny", sampling=None, cost=Non
     """A record with only what the claims read."""
     sampling = sampling or {}
     return {"key": f"{experiment}-{model}-{shape}-{seed}-{sorted(sampling.items())}-{sorted((scene or {}).items())}",
-            "status": "ok", "experiment": experiment, "model": model, "family": family or model,
+            "status": "ok", "schema_version": 1, "experiment": experiment, "model": model, "family": family or model,
             "shape": {"name": shape}, "sampling": sampling, "scene": scene or {},
             "metrics": {"chamfer_l2": chamfer, "n_points": 2000}, "cost": cost or {}, "config": {"seed": seed},
             "env": {"git_sha": sha, "device": device}}

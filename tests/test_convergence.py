@@ -12,7 +12,7 @@ from ddfbench.run.runs import write_json_atomic
 
 def run(model, shape, seed, probes, floor=1e-5):
     """A convergence record: probes [(seconds, chamfer)], F@0.01 = 1 - 10 x chamfer."""
-    return {"key": f"{model}-{shape}-{seed}", "status": "ok", "experiment": "convergence", "model": model,
+    return {"key": f"{model}-{shape}-{seed}", "status": "ok", "schema_version": 1, "experiment": "convergence", "model": model,
             "family": model, "shape": {"name": shape}, "config": {"seed": seed}, "env": {"git_sha": "abc"},
             "overrides": [f"model={model}", f"shape={shape}", f"seed={seed}"], "sampling": {}, "cost": {},
             "metrics": {"chamfer_l2": probes[-1][1], "noise_floor": {"chamfer_l2": floor, "fscore": {"0.01": 1.0}}},

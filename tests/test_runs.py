@@ -41,8 +41,8 @@ def test_atomic_write_leaves_no_temporary_and_is_strict_json(tmp_path):
 
 def record(status: str, **fields) -> dict:
     """The least a record holds to be read as one (runs.record_problem), with `fields` on top."""
-    return {"status": status, "key": "k", "experiment": "e", "metrics": {}, "cost": {}, "config": {}, "shape": {},
-            **fields}
+    return {"status": status, "schema_version": runs.SCHEMA_VERSION, "key": "k", "experiment": "e", "metrics": {},
+            "cost": {}, "config": {}, "shape": {}, **fields}
 
 
 def test_failed_write_keeps_the_old_record(tmp_path):
@@ -136,12 +136,17 @@ def test_find_records_keeps_one_record_a_key_and_leaves_out_another_schema(tmp_p
         runs.write_json_atomic(str(tmp_path / folder / "record.json"), record("ok", key="k"))
     runs.write_json_atomic(str(tmp_path / "old" / "record.json"),
                            record("ok", key="o", schema_version=runs.SCHEMA_VERSION - 1))
+    unversioned = {k: v for k, v in record("ok", key="u").items() if k != "schema_version"}  # made by hand
+    runs.write_json_atomic(str(tmp_path / "hand" / "record.json"), unversioned)
     assert [r["_dir"] for r in runs.find_records(str(tmp_path))] == [str(tmp_path / "a")]
+    assert not runs.is_done(str(tmp_path / "hand" / "record.json"))  # what a report counts, a sweep does not rerun
     err = capsys.readouterr().err
     assert f"skipped {tmp_path / 'copy_of_a' / 'record.json'}: a second record of run " in err
     assert f"(the first: {tmp_path / 'a' / 'record.json'})" in err
     assert (f"skipped {tmp_path / 'old' / 'record.json'}: schema_version {runs.SCHEMA_VERSION - 1}, not "
             f"{runs.SCHEMA_VERSION} (a sweep runs it again)") in err
+    assert (f"skipped {tmp_path / 'hand' / 'record.json'}: no schema_version, not {runs.SCHEMA_VERSION} (a sweep "
+            "runs it again)") in err
 
 
 def test_a_writer_that_fails_midway_leaves_the_old_file_and_no_temporary(tmp_path):

@@ -134,7 +134,7 @@ def is_done(path: str) -> bool:
 
 def find_records(root: str) -> list[dict[str, Any]]:
     """Every record.json below root (any depth), each with its own folder under "_dir". A file that is not
-    a record (cut short, not UTF-8, not a JSON object, another schema) is left out with a line on stderr naming it,
+    a record (cut short, not UTF-8, not a JSON object, another schema or none) is left out with a line on stderr naming it,
     as is a second record of a key already found (a copied run folder: the first in folder order stays)."""
     out, seen = [], {}
     for folder, dirs, files in os.walk(root):
@@ -143,8 +143,9 @@ def find_records(root: str) -> list[dict[str, Any]]:
             continue
         path = os.path.join(folder, RECORD_FILE)
         rec, problem = load_record(path)
-        if rec is not None and rec.get("schema_version", SCHEMA_VERSION) != SCHEMA_VERSION:
-            problem = f"schema_version {rec.get('schema_version')!r}, not {SCHEMA_VERSION} (a sweep runs it again)"
+        if rec is not None and rec.get("schema_version") != SCHEMA_VERSION:  # what is_done reads: a sweep reruns it
+            found = f"schema_version {rec['schema_version']!r}" if "schema_version" in rec else "no schema_version"
+            problem = f"{found}, not {SCHEMA_VERSION} (a sweep runs it again)"
         elif rec is not None and (first := seen.get((rec["experiment"], rec["key"]))) is not None:
             problem = f"a second record of run {rec['experiment']}/{rec['key']} (the first: {first})"
         if problem:
