@@ -274,12 +274,12 @@ def test_every_experiment_has_a_quick_form_with_one_seed_and_a_step_budget():
     seed at 200 steps with a light evaluation."""
     from hydra import compose, initialize_config_dir
 
-    from ddfbench.report.suite import Entry, jobs_per_model
+    from ddfbench.report.suite import Entry, expand
 
     for name in sorted(f[:-5] for f in os.listdir(os.path.join(CONF_DIR, "experiment")) if f.endswith(".yaml")):
         if name == "tune":  # the Optuna sweeper: trials, not a grid
             continue
-        full, quick = jobs_per_model(Entry(name, "x")), jobs_per_model(Entry(name, "x", ["+form=quick"]))
+        full, quick = expand(Entry(name, "x")).per_model(), expand(Entry(name, "x", ["+form=quick"])).per_model()
         assert set(quick) == set(full) and sum(quick.values()) <= sum(full.values()), name
         with initialize_config_dir(CONF_DIR, version_base="1.3"):
             cfg = compose("config", overrides=[f"+experiment={name}", "+form=quick"], return_hydra_config=True)

@@ -84,6 +84,8 @@ def test_a_bad_suite_or_tier_is_one_line_naming_it(tmp_path, monkeypatch):
         suite.load_suite("bad")
     with pytest.raises(InputError, match=r"suite 'v2': no conf/suite/v2.yaml \(suites: bad\)"):
         suite.load_suite("v2")
+    with pytest.raises(InputError, match=r"suite 'v2': no conf/suite/v2.yaml \(suites: bad\)"):
+        suite.load_neutral("v2")  # `status` reads it first: one line too, not a FileNotFoundError
 
 
 def sha(rev):

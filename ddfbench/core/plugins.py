@@ -45,6 +45,11 @@ def plugin_yaml(group: str, name: str) -> dict[str, Any]:
     return copy.deepcopy(_load(path))
 
 
+def top_yaml() -> dict[str, Any]:
+    """conf/config.yaml (the defaults every job starts from) as a plain dict (interpolations kept)."""
+    return copy.deepcopy(_load(os.path.join(CONF_DIR, "config.yaml")))
+
+
 def names(group: str) -> list[str]:
     """Every config of the group (families, their presets, samplers), sorted."""
     folder = os.path.join(CONF_DIR, group)

@@ -25,7 +25,7 @@ from typing import Iterable, Mapping
 import numpy as np
 from scipy import stats as _scipy_stats
 
-from ddfbench.report.stats import LEVEL, summarize_values
+from ddfbench.report.stats import LEVEL, Summary, summarize_values
 
 LOGIT_CLIP = 1e-6
 
@@ -50,12 +50,14 @@ def shape_means(values: Iterable[tuple[str, float]]) -> dict[str, float]:
     return {shape: float(np.mean(v)) for shape, v in by_shape.items()}
 
 
+def exponentiated(s: Summary, p: float = math.nan) -> OverShapes:
+    """A Summary of logs as exp of its mean and of its t interval (NaN bounds below n = 2; all NaN, n 0, for none)."""
+    return OverShapes(math.exp(s.mean), math.exp(s.lo), math.exp(s.hi), s.n, p)
+
+
 def _exp(logs: np.ndarray, level: float, p: float = math.nan) -> OverShapes:
     """exp of the mean of logs and of its t interval (NaN bounds below n = 2)."""
-    if len(logs) == 0:
-        return OverShapes(math.nan, math.nan, math.nan, 0)
-    s = summarize_values(logs, level)
-    return OverShapes(math.exp(s.mean), math.exp(s.lo), math.exp(s.hi), s.n, p)
+    return exponentiated(summarize_values(logs, level), p)
 
 
 def geometric(per_shape: Mapping[str, float], level: float = LEVEL) -> OverShapes:

@@ -107,9 +107,9 @@ def _interval(s: Summary, scale: float = 1e3, metric: str | None = "chamfer_l2")
 
 
 def _ratio(s: Summary) -> str:
-    if s.n < 2:
-        return f"{math.exp(s.mean):.3g}× (n={s.n}, no interval)" if s.n else "–"
-    return f"{math.exp(s.mean):.3g}× [{math.exp(s.lo):.3g}, {math.exp(s.hi):.3g}] (n={s.n} pairs)"
+    """A log ratio summarized over paired runs, as the ratio with its exponentiated interval ("3.35× [2.44, 4.59]
+    (n=3 pairs)")."""
+    return _over_shapes(across_shapes.exponentiated(s), "pairs")
 
 
 def below(s: Summary, bound: float, p_holm: float | None = None) -> str:
@@ -327,11 +327,6 @@ BVH_GROWTH_FACES = 5  # the BVH row keeps the shapes whose full mesh has at leas
 NO_RATIO = across_shapes.OverShapes(math.nan, math.nan, math.nan, 0)
 
 
-def _over_pairs(s: Summary) -> across_shapes.OverShapes:
-    """A log ratio summarized over paired runs as the ratio with its exponentiated interval (none: NO_RATIO)."""
-    return across_shapes.OverShapes(math.exp(s.mean), math.exp(s.lo), math.exp(s.hi), s.n) if s.n else NO_RATIO
-
-
 def _on_gpu(records: list[dict[str, Any]]) -> bool:
     return any(str((r.get("env") or {}).get("device", "")).startswith("cuda") for r in records)
 
@@ -373,7 +368,7 @@ class Frames:
         if self.over_shapes:
             means = lambda m: shape_means((key[0], v) for key, v in self._pick(m, metric, shapes).items())  # noqa: E731
             return across_shapes.ratio(means(a), means(b))
-        return _over_pairs(paired.log_ratio(self._pick(a, metric, shapes), self._pick(b, metric, shapes)))
+        return across_shapes.exponentiated(paired.log_ratio(self._pick(a, metric, shapes), self._pick(b, metric, shapes)))
 
     def within_run(self, model: str, metric: str, metric_b: str) -> across_shapes.OverShapes:
         """Each run's `metric` / its `metric_b`: over shapes the geometric mean of the per-shape geometric means over
@@ -383,7 +378,7 @@ class Frames:
         if self.over_shapes:
             return across_shapes.geometric({s: math.exp(v) for s, v in shape_means(
                 (key[0], x) for key, x in logs.items()).items()})
-        return _over_pairs(summarize_values(logs.values()))
+        return across_shapes.exponentiated(summarize_values(logs.values()))
 
     def values(self, model: str, metric: str) -> list[float]:
         """The model's `metric`: one per-shape mean over seeds a shape, or on one shape one value a seed."""
@@ -770,8 +765,7 @@ def load(results_dir: str) -> Records:
 def load_committed(reports: str) -> Records:
     """{experiment: records} from each report's committed compact records, reports/<experiment>/records.jsonl.gz
     (no file: empty)."""
-    path = lambda e: os.path.join(reports, e, compact.FILE)  # noqa: E731
-    records = {e: compact.read_compact(path(e)) if os.path.isfile(path(e)) else [] for e in EXPERIMENTS}
+    records = {e: compact.records_of(os.path.join(reports, e)) for e in EXPERIMENTS}
     gpu_race = os.path.join(reports, GPU_RACE_FILE)
     if os.path.isfile(gpu_race):
         with open(gpu_race) as fh:

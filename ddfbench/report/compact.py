@@ -28,7 +28,7 @@ from typing import IO, Any, Iterable
 
 from ddfbench.core.atomic import write_atomic
 from ddfbench.core.errors import InputError, one_line
-from ddfbench.run.runs import RECORD_FILE, SCHEMA_VERSION, find_records, record_problem, write_json_atomic
+from ddfbench.run.runs import SCHEMA_VERSION, find_records, record_path, record_problem, write_json_atomic
 
 FILE = "records.jsonl.gz"
 KEY = re.compile(r"[0-9a-f]{16}")  # runs.config_key
@@ -98,6 +98,12 @@ def read_compact(path: str, strict: bool = False) -> list[dict[str, Any]]:
     return out
 
 
+def records_of(folder: str) -> list[dict[str, Any]]:
+    """The records of a report folder's compact file (FILE); [] where the folder holds none."""
+    path = os.path.join(folder, FILE)
+    return read_compact(path) if os.path.isfile(path) else []
+
+
 def load_records(source: str, strict: bool = False) -> list[dict[str, Any]]:
     """The records of a folder of run records (any depth) or of a compact file (read_compact, strict)."""
     return read_compact(source, strict) if source.endswith(".jsonl.gz") else find_records(source)
@@ -120,7 +126,7 @@ def restore(path: str, out_dir: str) -> tuple[int, int, int]:
         if rec.get("status") != "ok" or rec.get("schema_version") != SCHEMA_VERSION:
             left += 1
             continue
-        target = os.path.join(out_dir, experiment, key, RECORD_FILE)
+        target = record_path(out_dir, experiment, key)
         if os.path.exists(target):
             kept += 1
             continue

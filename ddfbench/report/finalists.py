@@ -28,7 +28,7 @@ from omegaconf import OmegaConf
 
 from ddfbench.core.plugins import CONF_DIR
 from ddfbench.evaluate.metric_registry import by_name
-from ddfbench.report.across_shapes import OverShapes, fmt, geometric, ratio, shape_means
+from ddfbench.report.across_shapes import OverShapes, exponentiated, fmt, geometric, ratio, shape_means
 from ddfbench.report.paired import log_ratio
 from ddfbench.report.records import Record, no_result, ok_records, shape_name
 from ddfbench.report.shape_suite import cells_without_result
@@ -102,8 +102,7 @@ def _runs(records: list[Record], model: str, level: str) -> dict[tuple, float]:
 
 def _by_run(records: list[Record], model: str, a: str, b: str) -> OverShapes:
     """CD-L2 ratio a / b paired run by run (shape x seed) with its t interval over runs."""
-    s = log_ratio(_runs(records, model, a), _runs(records, model, b))
-    return OverShapes(math.exp(s.mean), math.exp(s.lo), math.exp(s.hi), s.n)
+    return exponentiated(log_ratio(_runs(records, model, a), _runs(records, model, b)))
 
 
 def verdicts(records: list[Record], rows: list[dict[str, Any]]) -> list[dict[str, Any]]:

@@ -26,7 +26,7 @@ import pandas as pd
 from ddfbench.core.atomic import write_atomic
 from ddfbench.core.errors import InputError
 from ddfbench.report import compact
-from ddfbench.report.stats import summarize_values
+from ddfbench.report.stats import sig3, summarize_values
 from ddfbench.report.tables import override_labels
 
 REFERENCE = "ddf_tuned"  # the DDF that render_time runs (its tuned preset); tests check it is a member
@@ -111,10 +111,6 @@ def matched_table(records: Iterable[dict[str, Any]], reference: str = REFERENCE)
     return pd.DataFrame(out)
 
 
-def _num(v: float, scale: float = 1.0, fmt: str = ".3g") -> str:
-    return "–" if v is None or not math.isfinite(v) else format(v * scale, fmt)
-
-
 def to_markdown(df: pd.DataFrame) -> str:
     """The matched table as markdown, one line per (shape, size, reference, family)."""
     header = ["shape", "size", "DDF depth err ×10³", "DDF warm s", "family", "default setting",
@@ -123,10 +119,10 @@ def to_markdown(df: pd.DataFrame) -> str:
     for _, r in df.iterrows():
         matched = r["matched_setting"] if r["matched_reached"] else f"{NOT_REACHED} (most accurate: {r['matched_setting']})"
         lines.append("| " + " | ".join([
-            str(r["shape"]), str(r["size"]), _num(r["reference_depth_mae"], 1e3), _num(r["reference_warm_s"]),
-            str(r["family"]), str(r["default_setting"]), _num(r["default_depth_mae"], 1e3), _num(r["default_warm_s"]),
-            _num(r["default_speedup"]), matched, _num(r["matched_depth_mae"], 1e3), _num(r["matched_warm_s"]),
-            _num(r["matched_speedup"])]) + " |")
+            str(r["shape"]), str(r["size"]), sig3(r["reference_depth_mae"], 1e3), sig3(r["reference_warm_s"]),
+            str(r["family"]), str(r["default_setting"]), sig3(r["default_depth_mae"], 1e3), sig3(r["default_warm_s"]),
+            sig3(r["default_speedup"]), matched, sig3(r["matched_depth_mae"], 1e3), sig3(r["matched_warm_s"]),
+            sig3(r["matched_speedup"])]) + " |")
     lines += ["", "Means over seeds (n in table.csv). × DDF time: the family's warm render time over the DDF's "
               "(> 1: the DDF is faster). Matched: the family's fastest setting whose mean depth error is at most "
               "the DDF's; 'not reached': no setting is that accurate."]

@@ -52,14 +52,13 @@ def runs(reports: str) -> pd.DataFrame:
     """One row per ok run that gave a result (records.no_result: not an empty mesh, not off the shape) of every report
     below `reports` that holds records.jsonl.gz (column `report`: its folder)."""
     frames = []
-    for folder, _, files in sorted(os.walk(reports)):
-        if compact.FILE in files:
-            df = per_run(compact.read_compact(os.path.join(folder, compact.FILE)))
-            if df.empty:  # a compact file without a record: no run to plot
-                continue
-            df.insert(0, "report", os.path.relpath(folder, reports))
-            # a run that gave no mesh, or one off the shape, is not a method result: its penalty is not plotted
-            frames.append(df[(df["status"] == "ok") & ~df["empty"].astype(bool) & ~df["off"].astype(bool)])
+    for folder in compact.folders_holding(reports, compact.FILE):
+        df = per_run(compact.records_of(folder))
+        if df.empty:  # a compact file without a record: no run to plot
+            continue
+        df.insert(0, "report", os.path.relpath(folder, reports))
+        # a run that gave no mesh, or one off the shape, is not a method result: its penalty is not plotted
+        frames.append(df[(df["status"] == "ok") & ~df["empty"].astype(bool) & ~df["off"].astype(bool)])
     return pd.concat(frames, ignore_index=True) if frames else pd.DataFrame()
 
 

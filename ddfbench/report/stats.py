@@ -91,9 +91,9 @@ def within_range(s: Summary, name: str, bounds: tuple[float, float] | None = Non
     return Summary(s.mean, s.std, s.n, min(max(s.lo, lo), hi), max(min(s.hi, hi), lo)) if s.n > 1 else s
 
 
-def sig3(x: float, scale: float = 1.0) -> str:
-    """x · scale to 3 significant digits, or "–" where x is not finite (a missing value in a table)."""
-    return f"{x * scale:.3g}" if math.isfinite(x) else "–"
+def sig3(x: float | None, scale: float = 1.0) -> str:
+    """x · scale to 3 significant digits, or "–" where x is None or not finite (a missing value in a table)."""
+    return f"{x * scale:.3g}" if x is not None and math.isfinite(x) else "–"
 
 
 def overlaps(a: tuple[float, float], b: tuple[float, float]) -> bool:

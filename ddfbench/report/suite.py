@@ -53,13 +53,18 @@ class Entry:
     overrides: list[str] = field(default_factory=list)
 
 
-def load_suite(name: str) -> dict[str, list[Entry]]:
-    """{tier: entries} of conf/suite/<name>.yaml; a one-line InputError naming the file and key when malformed."""
+def _suite_file(name: str) -> dict[str, Any]:
+    """conf/suite/<name>.yaml as a plain dict; a one-line InputError naming the suites there is none."""
     path = os.path.join(CONF_DIR, "suite", f"{name}.yaml")
     if not os.path.isfile(path):
         known = sorted(f[:-5] for f in os.listdir(os.path.join(CONF_DIR, "suite")) if f.endswith(".yaml"))
         raise InputError(f"suite '{name}': no conf/suite/{name}.yaml (suites: {', '.join(known)})")
-    tiers = OmegaConf.to_container(OmegaConf.load(path)).get("tiers")  # type: ignore[union-attr]
+    return OmegaConf.to_container(OmegaConf.load(path)) or {}  # type: ignore[return-value]
+
+
+def load_suite(name: str) -> dict[str, list[Entry]]:
+    """{tier: entries} of conf/suite/<name>.yaml; a one-line InputError naming the file and key when malformed."""
+    tiers = _suite_file(name).get("tiers")
     if not isinstance(tiers, dict) or not tiers:
         raise InputError(f"conf/suite/{name}.yaml: needs `tiers: {{tier: {{experiment: {{report: ...}}}}}}`")
     out: dict[str, list[Entry]] = {}
@@ -139,11 +144,6 @@ def _budget(job: dict[str, Any], choices: dict[str, str], overrides: list[str]) 
             float(work or 0.0))
 
 
-def jobs_per_model(entry: Entry) -> dict[str, int]:
-    """{model: jobs} of the experiment's sweep."""
-    return expand(entry).per_model()
-
-
 def _seconds(rec: dict[str, Any]) -> float | None:
     try:
         return (dt.datetime.fromisoformat(rec["finished"]) - dt.datetime.fromisoformat(rec["started"])).total_seconds()
@@ -163,11 +163,8 @@ def _level(rec: dict[str, Any]) -> str:
 
 def committed_records(reports: str) -> dict[str, list[dict[str, Any]]]:
     """{report folder relative to the repository: its compact records} for every records.jsonl.gz below reports."""
-    out = {}
-    for folder, _, files in os.walk(reports):
-        if compact.FILE in files:
-            out[os.path.relpath(folder, ROOT)] = compact.read_compact(os.path.join(folder, compact.FILE))
-    return out
+    return {os.path.relpath(folder, ROOT): compact.read_compact(os.path.join(folder, compact.FILE))
+            for folder in compact.folders_holding(reports, compact.FILE)}
 
 
 def _outside_fit(rec: dict[str, Any]) -> float:
@@ -269,19 +266,19 @@ def run(suite: str, tier: str, results: str, extra: list[str] | None = None, fro
     commit). only: the tier's experiments to run (default: all)."""
     entries = tier_entries(suite, tier, only)
     writable_folder(results, "--results ")
-    committed = {e.report: os.path.join(ROOT, e.report, compact.FILE) for e in entries}
+    committed = {e.report: os.path.join(ROOT, e.report) for e in entries}
     if from_reports:
         here = runs.code_sha()
-        for report, path in committed.items():
-            shas = runs.code_commits(compact.read_compact(path)) if os.path.isfile(path) else []
+        for report, folder in committed.items():
+            shas = runs.code_commits(compact.records_of(folder))
             if shas and shas != [here]:
                 raise InputError(f"--from-reports: {report}'s records are of code {', '.join(s[:7] for s in shas)}, "
                                  f"this checkout's code is {str(here)[:7]}: run from a worktree at their commit (a "
                                  "report refuses records of two commits)")
     rc = 0
     for entry in entries:
-        if from_reports and os.path.isfile(committed[entry.report]):
-            written, kept, left = compact.restore(committed[entry.report], results)
+        if from_reports and os.path.isfile(os.path.join(committed[entry.report], compact.FILE)):
+            written, kept, left = compact.restore(os.path.join(committed[entry.report], compact.FILE), results)
             print(f"{entry.experiment}: restored {written} committed records from {entry.report} ({kept} already "
                   f"in results, {left} left out to run again)", flush=True)
         cmd = [sys.executable, "-m", "ddfbench", f"+experiment={entry.experiment}", f"out_dir={results}", "quiet=true",
@@ -356,8 +353,7 @@ def load_neutral(name: str) -> dict[str, str]:
     """{full commit hash: why} of conf/suite/<name>.yaml's `result_neutral`: commits that changed code of the stale
     scope but no measured value of a run; a one-line InputError naming the file and key when malformed. An entry that
     is not a commit of this clone (a shallow one) is left out with a line on stderr: it counts for nothing."""
-    spec = OmegaConf.to_container(OmegaConf.load(os.path.join(CONF_DIR, "suite", f"{name}.yaml"))) or {}
-    neutral = spec.get("result_neutral") or {}  # type: ignore[union-attr]
+    neutral = _suite_file(name).get("result_neutral") or {}
     where = f"conf/suite/{name}.yaml: result_neutral"
     if not isinstance(neutral, dict):
         raise InputError(f"{where}: needs {{commit: why the commit changes no measured value}}")

@@ -192,10 +192,8 @@ def frame_records(sets: dict[str, list[Record]]) -> list[Record]:
 
 
 def table(reports: str) -> str:
-    sets = {}
-    for name in (SHORT, FULL, FRAMES, OTHER_FRAMES, GRID, EPOCHS):
-        path = os.path.join(reports, name, compact.FILE)
-        sets[name] = compact.read_compact(path) if os.path.isfile(path) else []
+    sets = {name: compact.records_of(os.path.join(reports, name)) for name in (SHORT, FULL, FRAMES, OTHER_FRAMES, GRID,
+                                                                                 EPOCHS)}
     return pipe_table(HEADER, rows(sets[SHORT], sets[FULL], frame_records(sets), sets[GRID], sets[EPOCHS])) + "\n" \
         + footnote(sets) + "\n"
 

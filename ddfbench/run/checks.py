@@ -15,8 +15,6 @@ import os
 import re
 from typing import Any, Callable, Mapping
 
-from omegaconf import OmegaConf
-
 from ddfbench.core import plugins
 from ddfbench.core.errors import InputError, checked_int
 from ddfbench.fit.budget import KINDS
@@ -69,23 +67,20 @@ def declared_values() -> dict[str, dict[str, tuple[Any, ...]]]:
     """{"": top-level keys, "train" / "eval" / "oracle": their keys} -> every value a YAML gives the key: what
     conf/config.yaml, the train and eval groups and the experiments (which may add keys of their own, such as
     `capacity`) declare."""
-    def yaml(*parts: str) -> dict[str, Any]:
-        return OmegaConf.to_container(OmegaConf.load(os.path.join(plugins.CONF_DIR, *parts)), resolve=False)
-
     out: dict[str, dict[str, list[Any]]] = {"": {g: [] for g in GROUPS}, "oracle": {}}
 
     def declare(section: str, values: Mapping[str, Any]) -> None:
         for key, value in values.items():
             out.setdefault(section, {}).setdefault(key, []).append(value)
 
-    config = yaml("config.yaml")
+    config = plugins.top_yaml()
     declare("", config)
     declare("oracle", config["oracle"])
     for section in ("train", "eval"):
         for name in plugins.names(section):
-            declare(section, yaml(section, f"{name}.yaml"))
+            declare(section, plugins.plugin_yaml(section, name))
     for name in plugins.names("experiment"):
-        experiment = yaml("experiment", f"{name}.yaml")
+        experiment = plugins.plugin_yaml("experiment", name)
         declare("", experiment)
         for section in CHECKED_SECTIONS:
             if isinstance(experiment.get(section), dict):

@@ -10,6 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from ddfbench.core.geometry import BOX_HALF
+from ddfbench.sampling.box import uniform_in_box
 from ddfbench.sampling.samples import Samples
 from ddfbench.truth.oracle import Oracle
 
@@ -21,6 +22,6 @@ def oracle_sdf_samples(mesh, oracle: Oracle, n: int, seed: int, domain: float = 
     surface = np.asarray(mesh.sample(2 * n_near, seed=int(rng.integers(2**31))), np.float32)
     sigma = np.r_[np.full(n_near, 0.005), np.full(n_near, 0.03)].astype(np.float32)[:, None]
     near = surface + rng.normal(size=surface.shape).astype(np.float32) * sigma
-    uniform = rng.uniform(-domain, domain, (n - 2 * n_near, 3)).astype(np.float32)
+    uniform = uniform_in_box(rng, n - 2 * n_near, domain)
     x = np.clip(np.concatenate([near, uniform]), -domain, domain)
     return Samples(x=x, sdf=oracle.signed_distance(x), meta={"strategy": "oracle_sdf", "seed": seed})
