@@ -280,3 +280,33 @@ def test_the_ddf_sdf_claim_over_shapes_is_refuted_far_from_one_and_confirmed_nea
     assert near.verdict == claims.CONFIRMED
     (none,) = claims.accurate_as_sdf_over_shapes({"shape_suite": []})
     assert none.verdict == claims.NO_RECORDS
+
+
+
+def test_a_refutation_at_the_equivalence_bound_is_holm_tested_at_that_bound_not_at_one():
+    """DDF/SDF above 1.5 on every shape, its unadjusted interval above 1.5 and its p against 1 far below 0.05 after
+    Holm, but its p against 1.5 (the claim's bound) not: not separable (as reports/shape_suite at dc0a417: 6.05x
+    [1.62, 22.6], Holm p 0.036 against 1 but 0.12 against 1.5)."""
+    import numpy as np
+    import scipy.stats
+
+    from ddfbench.report import claims
+    from ddfbench.report.across_shapes import ratio_p
+    from ddfbench.report.stats import holm
+
+    logs = np.log(1.5) + np.array([0.05, 0.6, 0.1, 0.3, 0.12, 0.5])
+    grid = [0.5, 3.0, 0.6, 2.5, 0.7, 2.0]  # the grid SDF: the family's other two ratios far from separable
+    out = []
+    for i, shape in enumerate(SHAPES):
+        out += [rec("neural_sdf_tuned", shape, 0, 1e-4), rec("ddf_tuned", shape, 0, 1e-4 * float(np.exp(logs[i]))),
+                rec("grid_sdf", shape, 0, 1e-4 * grid[i])]
+    lo = np.exp(logs.mean() - scipy.stats.t.ppf(0.975, 5) * logs.std(ddof=1) / np.sqrt(6))
+    assert lo > 1.5  # the unadjusted interval alone would refute
+    p1, p_bound = scipy.stats.ttest_1samp(logs, 0.0).pvalue, scipy.stats.ttest_1samp(logs, np.log(1.5)).pvalue
+    others = [scipy.stats.ttest_1samp(logs - np.log(grid), 0.0).pvalue, scipy.stats.ttest_1samp(-np.log(grid), 0.0).pvalue]
+    assert holm([p1, *others])[0] < 0.05 <= holm([p_bound, *others])[0]
+    a, b = {s: 1e-4 * float(np.exp(v)) for s, v in zip(SHAPES, logs)}, {s: 1e-4 for s in SHAPES}
+    assert ratio_p(a, b, 1.5) == pytest.approx(p_bound)
+    (row,) = claims.accurate_as_sdf_over_shapes({"shape_suite": out})
+    assert row.verdict == claims.NOT_SEPARABLE, row.measured
+    assert "against 1.5" in row.measured

@@ -89,6 +89,17 @@ def ratio(a: Mapping[str, float], b: Mapping[str, float], level: float = LEVEL) 
     return _exp(logs, level, p)
 
 
+def ratio_p(a: Mapping[str, float], b: Mapping[str, float], against: float = 1.0) -> float:
+    """Two-sided p of the t test of the mean log of a / b over the shared shapes (both > 0) against log(against):
+    the test of "the ratio is `against`", e.g. an equivalence bound (NaN below n = 2; 0 or 1 with no spread)."""
+    logs = np.asarray([math.log(a[s] / b[s]) for s in a if s in b and a[s] > 0 and b[s] > 0])
+    if len(logs) < 2:
+        return math.nan
+    if np.ptp(logs) < 1e-12:
+        return 0.0 if abs(logs.mean() - math.log(against)) > 1e-12 else 1.0
+    return float(_scipy_stats.ttest_1samp(logs, math.log(against)).pvalue)
+
+
 def fmt(s: OverShapes, scale: float = 1.0) -> str:
     """'center [lo, hi] (n N)' at 3 significant digits, times scale ('–' without a center, no bounds below n 2)."""
     if not math.isfinite(s.center):
