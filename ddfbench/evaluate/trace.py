@@ -235,7 +235,7 @@ def _illinois(field: TorchField, o: torch.Tensor, d: torch.Tensor, a: torch.Tens
     """Root of side*f on [a, b] with fa > 0 > fb (Illinois regula falsi, at most opt.refine_steps
     evaluations per ray; a ray stops at a point on its own side within the hit tolerance)
     -> (t (M,), evaluations)."""
-    root = (a * fb - b * fa) / (fb - fa)
+    root = false_position(a, fa, b, fb)
     live = torch.arange(a.numel(), device=a.device)
     last = torch.zeros_like(a)  # +1: a moved last, -1: b moved last
     evals = 0
@@ -256,8 +256,16 @@ def _illinois(field: TorchField, o: torch.Tensor, d: torch.Tensor, a: torch.Tens
         keep = ~out | (fc >= opt.eps * c + opt.eps_abs)  # converged from the ray's side only
         live, a, fa, b, fb, last = live[keep], a[keep], fa[keep], b[keep], fb[keep], last[keep]
     if live.numel():
-        root[live] = (a * fb - b * fa) / (fb - fa)
+        root[live] = false_position(a, fa, b, fb)
     return root, evals
+
+
+def false_position(a: torch.Tensor, fa: torch.Tensor, b: torch.Tensor, fb: torch.Tensor) -> torch.Tensor:
+    """The regula-falsi estimate (a fb - b fa) / (fb - fa) of a root bracketed by [a, b] (fa > 0 > fb), or the
+    bracket's midpoint where that is not finite: a field that jumps to -inf past its surface (a diverged network)
+    gives inf / inf, and a hit must never report t = NaN."""
+    c = (a * fb - b * fa) / (fb - fa)
+    return torch.where(torch.isfinite(c), c, 0.5 * (a + b))
 
 
 # ---- normals ------------------------------------------------------------------------------

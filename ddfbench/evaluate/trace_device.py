@@ -43,7 +43,7 @@ import torch
 
 from ddfbench.core.errors import InputError
 from ddfbench.core.geometry import box_entry
-from ddfbench.evaluate.trace import TorchField, TraceOptions
+from ddfbench.evaluate.trace import TorchField, TraceOptions, false_position
 
 PRECISIONS = ("fp32", "tf32", "bf16")
 
@@ -211,7 +211,7 @@ class DeviceSphereTracer:
         """Root of side * f on [a, b], fa > 0 > fb, by exactly options.refine_steps Illinois iterations on every
         bracketed ray; a ray stops at the first point on its own side within the hit tolerance (trace._illinois's
         rule) and is frozen by torch.where from then on, so no iteration syncs. -> t (M,)."""
-        root = (a * fb - b * fa) / (fb - fa)
+        root = false_position(a, fa, b, fb)
         live = torch.ones_like(a, dtype=torch.bool)
         last = torch.zeros_like(a)  # +1: a moved last, -1: b moved last
         for _ in range(self.options.refine_steps):
@@ -228,4 +228,4 @@ class DeviceSphereTracer:
             b, fb = torch.where(live, b_n, b), torch.where(live, fb_n, fb)
             last = torch.where(live, torch.where(out, 1.0, -1.0), last)
             live = live & (~out | (fc >= self.eps * c + self.eps_abs))
-        return torch.where(live, (a * fb - b * fa) / (fb - fa), root)
+        return torch.where(live, false_position(a, fa, b, fb), root)

@@ -106,3 +106,20 @@ def plate_grid():
 def test_over_relaxation_keeps_grazing_hits_on_a_grid_field(plate_grid, omega):
     o, d = grazing_plate_rays(1500, seed=4)
     compare_relaxed(plate_grid.field, o, d, omega)
+
+
+def test_field_jumping_to_minus_inf_gives_a_finite_hit():
+    """A field that is finite before its surface and -inf past it (a diverged network's overflow) brackets a
+    root with fb = -inf: regula falsi is inf/inf there, and the hit must still have a finite t (both tracers)."""
+    from ddfbench.evaluate.trace_device import DeviceSphereTracer
+
+    def field(p):
+        return torch.where(p[:, 0] < 0.1, 0.4 - p[:, 0], torch.tensor(-float("inf")))
+
+    o = np.array([[-0.5, 0.0, 0.0], [-0.5, 0.01, 0.0]], np.float32)
+    d = np.array([[1.0, 0.0, 0.0], [1.0, 0.0, 0.0]], np.float32)
+    res = sphere_trace(field, o, d, 0.6, TraceOptions())
+    assert res.hit.all() and np.isfinite(res.t).all(), res.t
+    assert np.allclose(res.t, 0.6, atol=1e-5)
+    t = DeviceSphereTracer(field, 0.6, TraceOptions())(torch.from_numpy(o), torch.from_numpy(d))
+    assert torch.isfinite(t).all() and torch.allclose(t, torch.full_like(t, 0.6), atol=1e-5), t
