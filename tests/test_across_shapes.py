@@ -39,12 +39,13 @@ def test_the_same_ratio_on_every_shape_is_certain_not_unknown():
     assert (got.center, got.lo, got.hi, got.p) == (pytest.approx(2.0), pytest.approx(2.0), pytest.approx(2.0), 0.0)
 
 
-def test_a_bounded_metric_gets_the_logit_t_interval():
-    got = ax.bounded({"a": 0.2, "b": 0.8})
-    # logits -ln 4 and ln 4: mean 0, std ln4 sqrt 2, half 12.706 ln4
-    assert got.center == pytest.approx(0.5)
-    assert got.lo == pytest.approx(1 / (1 + math.exp(12.7062047 * math.log(4))), rel=1e-6)
-    assert got.hi == pytest.approx(1 - got.lo, rel=1e-9)
+def test_a_share_gets_the_plain_mean_and_its_t_interval_cut_to_zero_one():
+    got = ax.share_mean({"a": 0.6, "b": 0.8, "c": 1.0})
+    # mean 0.8, std 0.2, half width t(0.975, 2) 0.2 / sqrt 3 = 4.302653 * 0.1154701 = 0.4968275
+    assert (got.center, got.n) == (pytest.approx(0.8), 3)
+    assert got.lo == pytest.approx(0.8 - 0.4968275, rel=1e-6) and got.hi == 1.0
+    # an F-score of exactly 1 on a shape counts as 1, not as a clipped logit that outweighs the rest
+    assert ax.share_mean({"a": 1.0, "b": 0.5, "c": 0.5}).center == pytest.approx(2 / 3)
 
 
 def test_holm_steps_down_and_keeps_the_order():
@@ -57,7 +58,7 @@ def test_holm_steps_down_and_keeps_the_order():
 @settings(max_examples=60, deadline=None, derandomize=True)
 @given(st.lists(st.floats(0.0, 1.0), min_size=2, max_size=16))
 def test_a_bounded_metric_interval_stays_inside_zero_one(values):
-    got = ax.bounded({f"s{i}": v for i, v in enumerate(values)})
+    got = ax.share_mean({f"s{i}": v for i, v in enumerate(values)})
     assert 0.0 <= got.lo <= got.center <= got.hi <= 1.0
 
 

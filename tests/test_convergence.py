@@ -38,6 +38,17 @@ def test_time_to_floor_median_over_seeds_and_not_reached():
     assert "| ddf | bunny | 3 | 0.01 | 10 (3/3) | 100 (3/3) |" in md and "not reached (1/3)" in md
 
 
+def test_a_failed_seed_is_a_seed_that_never_reached_the_floor():
+    recs = [run("ddf", "bunny", s, [(1, 1e-3), (10, 4e-5)]) for s in range(2)]
+    diverged = dict(run("ddf", "bunny", 2, [(1, 1e-3)]), status="failed")  # e.g. a non-finite loss
+    row = convergence.time_to_floor_rows(recs + [diverged])[0]
+    assert (row["n"], row["reached_5x"], row["median_s_5x"]) == (3, 2, 10)
+    lost = [dict(run("gan_sdf", "bunny", s, [(1, 1e-3)]), status="failed") for s in range(3)]
+    (row,) = [r for r in convergence.time_to_floor_rows(recs + [diverged, *lost]) if r["model"] == "gan_sdf"]
+    assert (row["n"], row["reached_5x"]) == (3, 0) and math.isinf(row["median_s_5x"])
+    assert "| gan_sdf | bunny | 3 |" in convergence.to_markdown([row]) and "not reached (0/3)" in convergence.to_markdown([row])
+
+
 def test_time_to_floor_with_half_the_seeds_there_is_the_slower_of_those_that_did():
     """Four seeds, two reach 5 x the floor (at 10 s and 30 s): half got there, so the row gives a time (the lower
     median, 30 s), not 'not reached'; one of four is not enough."""

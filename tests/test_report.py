@@ -481,9 +481,10 @@ def test_a_fit_that_never_found_the_shape_is_counted_and_a_row_of_them_is_not_co
     assert "3 (3 off the shape) not converged" in next(line for line in md.splitlines() if line.startswith("| gan_lost"))
     assert "(k off the shape): k runs gave a surface with F@0.02 = 0" in md
     assert md.splitlines()[0].startswith("| model | shape | budget | n | CD-L2")  # a count, not a label column
-    # the Pareto plot draws a row of no results as a cross, off the front, as it does an all-empty row
-    points = {p["model"]: p["empty"] for p in plots._config_points(mixed + lost + both, "fit_s")}
-    assert points == {"gan_sdf": False, "gan_lost": True, "gan_both": True}
+    # the Pareto plot draws a row with a run of no result as a cross, off the front, as the table leaves it unranked
+    points = {p["model"]: p["empty"] for p in plots._config_points(mixed + lost + near + both, "fit_s")}
+    assert points == {"gan_sdf": True, "gan_lost": True, "gan_near": False, "gan_both": True}
+    assert set(tables.ranked(df.reset_index())["model"]) == {"gan_near", "mesh_lod500"}
 
 
 def test_a_row_with_an_empty_run_is_not_ranked_nor_tied_with_the_best():

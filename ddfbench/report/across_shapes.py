@@ -5,9 +5,9 @@ gets n = the number of shapes. Every interval here stays inside its metric's ran
 
     positive, unbounded (chamfer, seconds, bytes)   geometric mean over shapes, t interval of the mean log,
                                                      exponentiated: bounds > 0
-    bounded in [0, 1] (F-score, normal consistency) the same on the logit scale: the back-transformed mean logit
-                                                     and t interval (values clipped to [1e-6, 1 - 1e-6]): bounds
-                                                     inside (0, 1), as wide at small n as the chamfer's
+    a share in [0, 1] (F-score, normal consistency)  the arithmetic mean over shapes and its t interval cut to
+                                                     [0, 1] (a mean logit would hinge on how a share of exactly 0 or
+                                                     1, common for the F-score, is clipped)
     a ratio a / b of two settings                    per shape ln(mean a / mean b); geometric mean ratio and the
                                                      exponentiated t interval of the mean log ratio; its
                                                      two-sided p (H0: ratio 1) for Holm's correction (the same
@@ -25,9 +25,7 @@ from typing import Iterable, Mapping
 import numpy as np
 from scipy import stats as _scipy_stats
 
-from ddfbench.report.stats import LEVEL, Summary, summarize_values
-
-LOGIT_CLIP = 1e-6
+from ddfbench.report.stats import LEVEL, Summary, summarize_values, within_range
 
 
 @dataclass(frozen=True)
@@ -66,17 +64,12 @@ def geometric(per_shape: Mapping[str, float], level: float = LEVEL) -> OverShape
     return _exp(np.log([v for v in per_shape.values() if v > 0]), level)
 
 
-def bounded(per_shape: Mapping[str, float], level: float = LEVEL) -> OverShapes:
-    """Back-transformed mean logit of per-shape values in [0, 1] and its t interval: inside (0, 1)."""
-    v = np.clip(np.asarray(list(per_shape.values()), float), LOGIT_CLIP, 1 - LOGIT_CLIP)
-    if len(v) == 0:
+def share_mean(per_shape: Mapping[str, float], level: float = LEVEL) -> OverShapes:
+    """Mean of per-shape shares in [0, 1] and its t interval cut to [0, 1] (NaN bounds below n = 2)."""
+    if not per_shape:
         return OverShapes(math.nan, math.nan, math.nan, 0)
-    s = summarize_values(np.log(v / (1 - v)), level)
-
-    def expit(x: float) -> float:
-        return 1.0 / (1.0 + math.exp(-x))
-
-    return OverShapes(expit(s.mean), expit(s.lo) if s.n > 1 else math.nan, expit(s.hi) if s.n > 1 else math.nan, s.n)
+    s = within_range(summarize_values(list(per_shape.values()), level), "share", (0.0, 1.0))
+    return OverShapes(s.mean, s.lo, s.hi, s.n)
 
 
 def ratio(a: Mapping[str, float], b: Mapping[str, float], level: float = LEVEL) -> OverShapes:

@@ -10,6 +10,7 @@ measured). The band at time t is over the seeds that have probed by t.
 from __future__ import annotations
 
 import math
+from collections import Counter
 from typing import Any, Iterable
 
 import numpy as np
@@ -70,18 +71,24 @@ def floor(records: Iterable[Record], shape: str | None = None, metric: str = "ch
 
 def time_to_floor_rows(records: list[Record], metric: str = "chamfer_l2") -> list[dict[str, Any]]:
     """Per (model, shape): seeds n, and per k in FLOOR_MULTIPLES the lower median of the seconds to reach k x floor
-    over the seeds (NOT_REACHED when fewer than half the seeds got there) and how many did."""
+    over the seeds (NOT_REACHED when fewer than half the seeds got there) and how many did. A failed run (e.g. a
+    diverged loss) counts as a seed that never got there."""
+    cells = curves(records, metric)
+    failed = Counter((str(r.get("model")), shape_name(r)) for r in records if r.get("status") == "failed")
     rows = []
-    for (model, shape), runs in curves(records, metric).items():
+    for model, shape in list(cells) + [c for c in failed if c not in cells]:
+        runs = cells.get((model, shape), [])
+        n = len(runs) + failed[(model, shape)]
         f = floor(records, shape, metric)
-        row: dict[str, Any] = {"model": model, "shape": shape, "n": len(runs), "floor": f,
-                               "budget_s": max(float(t[-1]) for t, _ in runs)}
+        row: dict[str, Any] = {"model": model, "shape": shape, "n": n, "floor": f,
+                               "budget_s": max((float(t[-1]) for t, _ in runs), default=math.nan)}
         for k in FLOOR_MULTIPLES:
-            times = [time_to_reach(t, v, k * f) for t, v in runs] if math.isfinite(f) else [math.inf] * len(runs)
+            reach = [time_to_reach(t, v, k * f) for t, v in runs] if math.isfinite(f) else [math.inf] * len(runs)
+            times = reach + [math.inf] * failed[(model, shape)]
             reached = [x for x in times if math.isfinite(x)]
             row[f"reached_{k:g}x"] = len(reached)
             # the lower median: with half the seeds there (the rest inf), the slower of the middle pair that did
-            row[f"median_s_{k:g}x"] = sorted(times)[(len(times) - 1) // 2] if 2 * len(reached) >= len(runs) else math.inf
+            row[f"median_s_{k:g}x"] = sorted(times)[(len(times) - 1) // 2] if 2 * len(reached) >= n else math.inf
         rows.append(row)
     return rows
 
@@ -97,7 +104,7 @@ def to_markdown(rows: list[dict[str, Any]]) -> str:
             s = r[f"median_s_{k:g}x"]
             cells.append((f"{s:.3g}" if math.isfinite(s) else NOT_REACHED) + f" ({r[f'reached_{k:g}x']}/{r['n']})")
         lines.append(f"| {r['model']} | {r['shape']} | {r['n']} | {r['floor'] * 1e3:.4g} | " + " | ".join(cells)
-                     + f" | {r['budget_s']:.0f} |")
+                     + (f" | {r['budget_s']:.0f} |" if math.isfinite(r["budget_s"]) else " | – |"))
     lines += ["", "Seconds of training (probes excluded) at the first probe whose chamfer L2 is at most k × the "
               "noise floor; median over seeds (the lower of the middle two at an even count), (reached/seeds); "
               "'not reached' where fewer than half the seeds got there within the budget. Probes are log-spaced, so "

@@ -13,15 +13,16 @@ from typing import Any, Callable, Iterable
 
 import numpy as np
 
-from ddfbench.evaluate.metric_registry import by_name
+from ddfbench.evaluate.metric_registry import Metric, by_name
 from ddfbench.report.records import SURFACE_FACTORS, Record, ok_records
 from ddfbench.report.stats import Summary, holm, sig3, summarize_values, t_test_p
 
 
-def values(records: Iterable[Record], metric: str, select: Callable[[Record], bool],
+def values(records: Iterable[Record], metric: str | Metric, select: Callable[[Record], bool],
            pair_key: Callable[[Record], tuple]) -> dict[tuple, float]:
-    """{pair key: metric value} of the ok records `select` keeps (finite values only)."""
-    read = by_name()[metric].read
+    """{pair key: metric value} of the ok records `select` keeps (finite values only); metric: a registry name, or a
+    Metric read by one report alone."""
+    read = (metric if isinstance(metric, Metric) else by_name()[metric]).read
     out = {pair_key(r): read(r) for r in ok_records(records) if select(r)}
     return {k: v for k, v in out.items() if math.isfinite(v)}
 

@@ -162,8 +162,9 @@ def plot_fit_curves(records: list[dict[str, Any]], out_dir: str) -> list[str]:
 
 
 def _config_points(records: list[dict[str, Any]], cost: str) -> list[dict[str, Any]]:
-    """Per configuration (seeds pooled): model, shape, mean cost x, mean chamfer y, empty (every run's
-    reconstruction was empty or off the shape: no method result, drawn as x and kept off the front)."""
+    """Per configuration (seeds pooled): model, shape, mean cost x, mean chamfer y, empty (a run's reconstruction
+    was empty or off the shape: its mean is no method result, drawn as x and kept off the front, as the tables
+    leave it unranked)."""
     groups: dict[str, list[dict[str, Any]]] = defaultdict(list)
     for r in ok_records(records):
         groups[_config_id(r)].append(r)
@@ -171,7 +172,7 @@ def _config_points(records: list[dict[str, Any]], cost: str) -> list[dict[str, A
     for members in groups.values():
         x, _ = _mean_std([as_float((m.get("cost") or {}).get(cost)) for m in members])
         y, _ = _mean_std([chamfer_l2(m) for m in members])
-        empty = all(no_result(m) for m in members)
+        empty = any(no_result(m) for m in members)
         out.append({"model": str(members[0].get("model")), "shape": shape_name(members[0]), "x": x, "y": y, "empty": empty})
     return out
 

@@ -23,7 +23,7 @@ import pandas as pd
 from scipy import stats as _scipy_stats
 
 from ddfbench.evaluate.metric_registry import by_name
-from ddfbench.report.across_shapes import bounded, fmt, geometric, ratio, shape_means
+from ddfbench.report.across_shapes import fmt, geometric, ratio, shape_means, share_mean
 from ddfbench.report.records import Record, no_result, no_result_label, ok_records, shape_name
 from ddfbench.report.stats import holm, welch_ratio
 from ddfbench.report.tables import pipe_table
@@ -104,11 +104,11 @@ def cells_without_result(records: list[Record]) -> list[dict[str, Any]]:
 
 
 def family_rows(records: list[Record]) -> list[dict[str, Any]]:
-    """Each model over the shapes: chamfer and fit time (geometric), F@0.01 (bounded), storage (geometric)."""
+    """Each model over the shapes: chamfer and fit time (geometric), F@0.01 (mean), storage (geometric)."""
     cd, f1, fit, size = (cells(records, m) for m in (CHAMFER, FSCORE, "fit_s", "storage_bytes"))
     rows = []
     for model in cd:
-        rows.append({"model": model, "chamfer": geometric(cd[model]), "fscore": bounded(f1[model]),
+        rows.append({"model": model, "chamfer": geometric(cd[model]), "fscore": share_mean(f1[model]),
                      "fit_s": geometric(fit[model]), "storage": geometric(size[model])})
     return sorted(rows, key=lambda r: r["chamfer"].center if math.isfinite(r["chamfer"].center) else math.inf)
 
@@ -199,11 +199,11 @@ def sections(records: list[Record], out_dir: str, draw: bool = True) -> list[str
                "(the surface strategy draws them per face, so their count follows the triangle count: a 12-triangle "
                "box gets a few dozen, a 166k-triangle scan hundreds of thousands).\n\n"
                + per_shape_markdown(records, tags))
-    header = ["model", "CD-L2 ×10³, geometric mean [95 %]", "F@0.01, logit mean [95 %]", "fit s, geometric mean",
+    header = ["model", "CD-L2 ×10³, geometric mean [95 %]", "F@0.01, mean [95 %]", "fit s, geometric mean",
               "storage B, geometric mean"]
     out.append("## Each family over the evaluation shapes\n\nn: shapes (each the mean over its seeds; a shape with a "
                "run that gave no result is left out and listed below). Intervals over shapes, on the log scale for "
-               "chamfer, time and bytes (never below 0), on the logit scale for the F-score (never outside (0, 1)). "
+               "chamfer, time and bytes (never below 0); the F-score's t interval is cut to [0, 1]. "
                f"Evaluation points per surface: {_points(records)}.\n\n"
                + pipe_table(header, [[r["model"], fmt(r["chamfer"], 1e3), fmt(r["fscore"]), fmt(r["fit_s"]),
                                fmt(r["storage"])] for r in fam]))
