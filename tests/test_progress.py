@@ -41,6 +41,9 @@ def test_line_names_the_job_its_result_and_the_remaining_time():
     assert text == "[12/32] ddf bunny ok  chamfer 0.35e-3  fit 60.2 s  elapsed 8:10  eta 13:37"
     empty = dict(rec, flags=["empty_reconstruction"], metrics={"chamfer_l2": 8.64})
     assert "penalty" in progress.line(32, 32, empty, 10.0) and "eta" not in progress.line(32, 32, empty, 10.0)
+    open_input = dict(rec, flags=["non_watertight_input"])  # else only the record's flags said so
+    assert "open input mesh" in progress.line(32, 32, open_input, 10.0)
+    assert "open input" not in text
 
 
 def test_no_state_no_line(tmp_path):

@@ -76,6 +76,27 @@ def test_degenerate_and_duplicate_faces_are_removed_with_warnings(tmp_path):
     assert shape.watertight
 
 
+def test_an_stl_file_reads_as_the_same_closed_mesh_as_its_obj(tmp_path):
+    """STL stores three corners per triangle: read unmerged, a closed torus was a soup (flagged open, its LODs
+    decimated apart into a CD-L2 ~200x the OBJ's)."""
+    torus = trimesh.creation.torus(major_radius=1.0, minor_radius=0.3)
+    torus.export(tmp_path / "t.stl")
+    torus.export(tmp_path / "t.obj")
+    stl, obj = load_file(tmp_path / "t.stl"), load_file(tmp_path / "t.obj")
+    assert stl.watertight and obj.watertight
+    assert (len(stl.mesh.vertices), len(stl.mesh.faces)) == (len(obj.mesh.vertices), len(obj.mesh.faces))
+    assert np.isclose(stl.mesh.area, obj.mesh.area) and np.isclose(stl.mesh.volume, obj.mesh.volume)
+
+
+def test_an_stl_joins_only_corners_at_exactly_one_position(tmp_path):
+    """A part 1e-9 across (trimesh's merge rounds to 1e-8 and would fold it to a point): its corners stay apart."""
+    tetra = trimesh.creation.icosphere(0, radius=1.0)
+    tiny = trimesh.Trimesh(tetra.vertices * 1e-9, tetra.faces, process=False)
+    tiny.export(tmp_path / "tiny.stl")
+    shape = load_file(tmp_path / "tiny.stl")
+    assert shape.watertight and len(shape.mesh.vertices) == 12 and len(shape.mesh.faces) == 20
+
+
 @pytest.mark.parametrize("offset", [1e3, 1e5, 1e7])
 def test_far_from_origin_normalizes_to_the_same_mesh(tmp_path, offset):
     sphere = trimesh.creation.icosphere(2, 0.7)

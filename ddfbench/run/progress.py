@@ -82,6 +82,8 @@ def line(done: int, total: int, record: Mapping[str, Any], elapsed: float) -> st
         parts.append("chamfer penalty (empty mesh)")
     elif isinstance(chamfer, (int, float)):
         parts.append(f"chamfer {chamfer * 1e3:.3g}e-3" if chamfer < 1 else f"chamfer {chamfer:.3g}")
+    if "non_watertight_input" in (record.get("flags") or []):  # the family's signs came from an inside test
+        parts.append("(open input mesh: inside/outside labels unreliable)")
     fit_s = (record.get("cost") or {}).get("fit_s")
     if isinstance(fit_s, (int, float)):
         parts.append(f"fit {fit_s:.3g} s")

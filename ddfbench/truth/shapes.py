@@ -80,7 +80,20 @@ def read_mesh_file(path: str) -> trimesh.Trimesh:
         raise InputError(f"shape file {path}: could not be parsed as .{ext} ({msg})") from None
     if isinstance(loaded, trimesh.PointCloud) or not hasattr(loaded, "faces") or len(loaded.faces) == 0:
         raise InputError(f"shape file {path}: has no faces (a point cloud or empty mesh); a triangle mesh is needed")
-    return loaded
+    return join_corners(loaded) if ext == "stl" else loaded
+
+
+def join_corners(mesh: trimesh.Trimesh) -> trimesh.Trimesh:
+    """The mesh with the corners that lie at exactly one position made one vertex. STL stores each triangle's own
+    three corners: unjoined, a closed mesh reads as a soup (open, its LODs decimated apart). Exact equality, not
+    trimesh's rounding to 1e-8, so no two distinct corners of a tiny or far-off mesh are joined."""
+    unique, inverse = np.unique(np.asarray(mesh.vertices, np.float64), axis=0, return_inverse=True)
+    return trimesh.Trimesh(unique, inverse.reshape(-1)[np.asarray(mesh.faces)], process=False)
+
+
+# a coordinate near the offset 2^k rounds by up to half its ulp, 2^(k - 54): at most 1e-6 of the extent when the
+# extent in units of 2^k is at least this (offset 1e10 with extent 1 passes, at 9.5e-7; 1e11 does not)
+ROUNDING_LIMIT = 2.0**-54 / 1e-6
 
 
 def validate(mesh: trimesh.Trimesh, label: str) -> tuple[trimesh.Trimesh, list[str]]:
@@ -108,9 +121,9 @@ def validate(mesh: trimesh.Trimesh, label: str) -> tuple[trimesh.Trimesh, list[s
     extent = float(np.ptp(u[np.unique(f)], axis=0).max())  # in units of 2^k
     if extent <= 0.0:
         raise InputError(f"{label}: all vertices coincide (zero-size bounding box)")
-    if extent < 1e-12:
+    if extent < ROUNDING_LIMIT:
         raise InputError(f"{label}: extent {math.ldexp(extent, k):g} is too small for its offset {offset:g} "
-                         "(float64 precision lost)")
+                         "(float64 precision lost: its coordinates round by more than 1e-6 of the extent)")
     if math.ldexp(extent, k) < 1e-300:  # 1 / extent, the scale to the unit cube, would overflow
         raise InputError(f"{label}: extent {math.ldexp(extent, k):g} is too small to scale to the unit cube")
     tri = u[f] - u[f].mean(axis=(0, 1))

@@ -47,7 +47,7 @@ def flat(metrics):
 
 
 @pytest.mark.parametrize("offset,scale,rel", [(1e3, 1, 1e-3), (1e5, 1, 1e-3), (1e7, 1, 1e-3), (0, 1e-3, 1e-3),
-                                              (0, 1e3, 1e-3), (1e7, 1e-3, 1e-2)])
+                                              (0, 1e3, 1e-3), (1e7, 1e-3, 1e-2), (1e10, 1, 1e-2)])
 def test_normalization_undoes_offset_and_scale(cow, reconstruction, reference_metrics, offset, scale, rel):
     moved = hard_shape("hard/moved", base="cow", offset=offset, scale=scale)
     assert moved.warnings == []
@@ -63,9 +63,10 @@ def test_normalization_undoes_offset_and_scale(cow, reconstruction, reference_me
         assert got[k] == pytest.approx(ref[k], **tol), k
 
 
-@pytest.mark.parametrize("offset", [1e10, 1e13])
-def test_offset_beyond_float64_precision_is_a_clear_error(offset):
+@pytest.mark.parametrize("offset,scale", [(1e10, 1e-3), (1e13, 1e-3), (1e11, 1.0)])
+def test_offset_beyond_float64_precision_is_a_clear_error(offset, scale):
     """At 1e13 the float64 spacing (2e-3) exceeds the 1e-3 extent and every face collapses: the error
-    names the cause (precision: extent too small for its offset), not its symptom (zero-area faces)."""
-    with pytest.raises(InputError, match="precision"):
-        hard_shape("hard/moved", base="cow", offset=offset, scale=1e-3)
+    names the cause (precision: extent too small for its offset), not its symptom (zero-area faces). At 1e11 a
+    unit shape would still mesh, but rounded by 7.6e-6 of its extent: past the 1e-6 promised, so an error too."""
+    with pytest.raises(InputError, match="precision lost: its coordinates round by more than 1e-6"):
+        hard_shape("hard/moved", base="cow", offset=offset, scale=scale)
