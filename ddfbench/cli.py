@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import logging
 import os
+import re
 import sys
 from typing import Any
 
@@ -145,25 +146,32 @@ def sweeps(args: list[str]) -> bool:
                                              or wants_default_experiment(args))
 
 
-def _known_keys(group: str, args: list[str]) -> tuple[dict[str, Any], dict[str, Any]]:
-    """(keys a `<group>.<key>=` override may set, keys the named config's own YAML holds): those of the
-    one config the command names (`model=ddf_paper`: its own and its family's), else of every config."""
+def _chosen(group: str, args: list[str]) -> list[str] | None:
+    """The configs of `group` the command names: one (`model=ddf_paper`) or a plain list (`model=mesh,grid_sdf`);
+    None where it names none or a glob, range or interpolation (an experiment's own list: any config may run)."""
     chosen = [a.split("=", 1)[1] for a in args if a.lstrip("+").startswith(f"{group}=")]
-    names = chosen if len(chosen) == 1 and "," not in chosen[0] else plugins.names(group)
-    known: dict[str, Any] = {}
-    for name in names:
-        own = plugins.defaults(group, name)
-        known.update(plugins.model_defaults(name) if group == "model" else own)
-    return known, (own if len(names) == 1 else known)
+    if len(chosen) == 1 and re.fullmatch(r"[\w.-]+(,[\w.-]+)*", chosen[0]):
+        return chosen[0].split(",")
+    return None
+
+
+def _config_keys(group: str, name: str) -> tuple[dict[str, Any], dict[str, Any]]:
+    """(keys a `<group>.<key>=` override may set for config `name`: its own and, for a model, its family's; the keys
+    its own YAML holds)."""
+    own = plugins.defaults(group, name)
+    return (plugins.model_defaults(name) if group == "model" else own), own
 
 
 def checked_overrides(args: list[str]) -> list[str]:
     """args with each `model.<key>=` / `sampling.<key>=` checked against the plugin's known keys.
 
-    An unknown key is a one-line InputError naming it and the known keys. A key the family has but the
-    chosen preset's YAML leaves to the family's defaults (model=ddf_paper model.entry_share=0.3) is
-    passed as `++model.<key>=`, so Hydra adds it instead of refusing it.
+    An unknown key is a one-line InputError naming it and the known keys: those of every config the command names
+    (in a list `model=mesh,grid_sdf`, a key one of them lacks is refused naming it, before any job), else of any
+    config. A key the family has but a chosen preset's YAML leaves to the family's defaults (model=ddf_paper
+    model.entry_share=0.3) is passed as `++model.<key>=`, so Hydra adds it instead of refusing it.
     """
+    from ddfbench.core.errors import InputError
+
     out = []
     for arg in args:
         path, _, value = arg.lstrip("+").partition("=")
@@ -171,9 +179,19 @@ def checked_overrides(args: list[str]) -> list[str]:
         if not _ or group not in plugins.NAME_KEYS or not key:
             out.append(arg)
             continue
-        known, own = _known_keys(group, args)
-        plugins.strict_keys(group, {key.split(".")[0]: value}, known, near=True)
-        out.append(f"++{path}={value}" if key.split(".")[0] not in own and not arg.startswith("+") else arg)
+        root, names = key.split(".")[0], _chosen(group, args)
+        keys = {name: _config_keys(group, name) for name in names or plugins.names(group)}
+        plugins.strict_keys(group, {root: value}, {k: v for known, _ in keys.values() for k, v in known.items()},
+                            near=True)  # a key no config that may run has
+        if names is None:  # an experiment's configs: each job checks its own (ddfbench.run.checks)
+            out.append(arg)
+            continue
+        for name, (known, _) in keys.items():
+            if root not in known:
+                raise InputError(f"{path}: {group}={name} of this sweep has no key {root!r} (known: "
+                                 f"{', '.join(sorted(known))}); sweep the {group}s that have it in their own command")
+        lacking = any(root not in own for _, own in keys.values())
+        out.append(f"++{path}={value}" if lacking and not arg.startswith("+") else arg)
     return out
 
 

@@ -163,6 +163,21 @@ def test_command_line_overrides_are_checked_against_the_named_plugin():
         checked_overrides(["model=ddf", "model.faces=5"])  # a mesh key, not a DDF's
 
 
+def test_a_swept_list_of_plugins_is_checked_config_by_config_before_any_job():
+    from ddfbench.cli import checked_overrides
+
+    # Hydra's own refusal was five lines, telling the user to try `+model.resolution=`, which each job then refuses
+    with pytest.raises(InputError, match=r"^model.resolution: model=mesh of this sweep has no key 'resolution' "
+                                         r"\(known: backend, faces, family\); sweep the models that have it"):
+        checked_overrides(["-m", "model=grid_sdf,mesh", "model.resolution=64"])
+    with pytest.raises(InputError, match=r"^sampling.s_p: sampling=random of this sweep has no key 's_p'"):
+        checked_overrides(["-m", "sampling=surface,random", "sampling.s_p=20"])
+    # every swept preset has the key, one only through its family's YAML: added for all (++), as for one preset
+    assert checked_overrides(["-m", "model=ddf,ddf_paper", "model.entry_share=0.3"]) == \
+        ["-m", "model=ddf,ddf_paper", "++model.entry_share=0.3"]
+    assert checked_overrides(["-m", "model=ddf,ddf_tuned", "model.lr=1e-3"])[-1] == "model.lr=1e-3"  # in both YAMLs
+
+
 def test_the_cli_shortens_openmp_spin_unless_the_environment_sets_a_wait_policy(monkeypatch):
     from ddfbench import cli
 
