@@ -10,11 +10,12 @@ the best mean is bold only when its t interval over seeds overlaps no other row'
 rows whose intervals overlap the best are marked tied (report.stats). A row with an empty or off-shape run takes
 no part in that ranking. The metric's noise floor (GT
 against an independent resample of GT) is its own row per shape. The fit budget ("steps",
-"epochs" or "wall-clock") is a column, beside steps, epochs and fit seconds.
+"epochs" or "wall-clock"; "built" for a family that trains nothing) is a column, beside steps, epochs and fit seconds.
 """
 
 from __future__ import annotations
 
+import functools
 import json
 import math
 from typing import Any, Iterable
@@ -63,9 +64,18 @@ def override_labels(overrides: Iterable[str]) -> dict[str, str]:
     return out
 
 
+@functools.cache
+def _built(family: str) -> bool:
+    """Whether `family` is one of this checkout's families that build from the mesh and train nothing."""
+    from ddfbench.models import available_families, load_family
+
+    return family in available_families() and not load_family(family).learned
+
+
 def budget_label(rec: dict[str, Any]) -> str:
-    """How the fit was bounded: "steps" | "epochs" | "wall-clock" (record fit.budget; "–" if none)."""
-    return str((rec.get("fit") or {}).get("budget") or "–")
+    """How the fit was bounded: "steps" | "epochs" | "wall-clock" (record fit.budget; "–" if none), or "built" for a
+    family that trains nothing (its record holds the configured kind, which bound nothing)."""
+    return "built" if _built(str(rec.get("family"))) else str((rec.get("fit") or {}).get("budget") or "–")
 
 
 def record_row(rec: dict[str, Any]) -> dict[str, Any]:
@@ -123,7 +133,7 @@ def summarize(records: Iterable[dict[str, Any]]) -> pd.DataFrame:
     """One row per configuration (seeds pooled).
 
     Columns: model, shape, one per varying override key (its value, None where a record lacks it),
-    budget (steps | epochs | wall-clock), eval_points (points a surface the sampled metrics were measured on), n (ok
+    budget (steps | epochs | wall-clock | built), eval_points (points a surface the sampled metrics were measured on), n (ok
     runs), n_failed, n_expected (runs of the fullest row), n_empty (ok runs whose reconstruction
     was empty: their metrics are the defined penalty), n_off (ok runs off the shape, `off_shape`), not_converged
     (every ok run empty or off the shape: not a method result, not ranked), errors, keys (record hashes),
