@@ -368,6 +368,19 @@ def test_the_verdict_says_not_converged_only_when_every_bunny_run_gave_no_result
     assert "left out" not in rows[("neural_sdf_tuned", "own")][last]
 
 
+
+def test_a_bunny_run_that_failed_is_counted_in_the_verdict_not_dropped():
+    import copy
+
+    from ddfbench.report import verdict
+
+    short = copy.deepcopy(compact.read_compact(os.path.join(ROOT, "reports", "default", compact.FILE)))
+    ddf_bunny = [r for r in short if r["model"] == "ddf_tuned" and r["shape"]["name"] == "bunny"]
+    ddf_bunny[0]["status"] = "failed"  # a crashed seed: the two others still give means
+    rows = {(r[0], r[1].split(":")[0]): r for r in verdict.rows(short, [])}
+    assert rows[("ddf_tuned", "short")][2].startswith(f"no result, not ranked (1 of {len(ddf_bunny)} runs")
+
+
 def test_the_verdict_gives_a_preset_budgeted_in_epochs_its_own_row_without_a_column_over_shapes():
     import copy
 

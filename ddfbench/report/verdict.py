@@ -114,15 +114,16 @@ def rows(short: list[Record], full: list[Record], frames: list[Record] = (),
     out = []
     for model in models:
         for (recs, label, _), over in zip(budgets, over_shapes):
-            mine = [r for r in ok_records(recs) if r.get("model") == model and shape_name(r) == SHAPE]
+            runs = [r for r in recs if r.get("model") == model and shape_name(r) == SHAPE]
+            mine = ok_records(runs)
             if not mine:
                 continue
             budget = f"{label}: {_steps(mine)}"
-            failed = sum(no_result(r) for r in mine)
+            failed = len(runs) - len(mine) + sum(no_result(r) for r in mine)  # a run that failed gave no result either
             if failed:
                 steps = sorted({(r.get("fit") or {}).get("steps") for r in mine})
-                how = NOT_CONVERGED if failed == len(mine) else "no result, not ranked"
-                out.append([model, budget, f"{how} ({failed} of {len(mine)} runs, steps {steps})"]
+                how = NOT_CONVERGED if failed == len(runs) else "no result, not ranked"
+                out.append([model, budget, f"{how} ({failed} of {len(runs)} runs, steps {steps})"]
                            + ["–"] * (len(HEADER) - 3))
                 continue
             suite = "–"
