@@ -65,7 +65,7 @@ def test_intersect_answers_every_ray_in_the_documented_shapes_and_never_nan(fitt
     assert h.t.shape == (n,) and h.t.dtype == np.float32 and h.hit.shape == (n,) and h.hit.dtype == bool
     assert h.normal.shape == (n, 3) and h.normal.dtype == np.float32 and h.status.shape == (n,)
     assert not np.isnan(h.t).any() and not np.isnan(h.normal).any()
-    assert (h.t[h.hit] >= 0).all() and np.isposinf(h.t[~h.hit]).all()
+    assert (h.t[h.hit] >= 0).all() and np.isfinite(h.t[h.hit]).all() and np.isposinf(h.t[~h.hit]).all()
     assert set(np.unique(h.status)) <= {int(s) for s in RayStatus}
     assert ((h.status == RayStatus.HIT) == h.hit).all()
     assert h.hit[: n // 2].mean() >= 0.9 and h.hit[n // 2:].mean() <= 0.1  # the sphere's answers, not a stub's

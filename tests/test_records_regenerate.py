@@ -430,3 +430,18 @@ def test_the_verdict_footnote_times_one_fixed_build_in_each_record_set_only_at_o
         r["cost"]["fit_s"] = 4.25
     assert verdict.same_work_seconds({"default": short, "shape_suite": slower, "storage": third}).endswith(
         f"took {mean:.3g} s in `reports/default`, 4.25 s in `reports/storage`.")  # the odd set alone is left out
+
+
+def test_a_preset_whose_every_bunny_run_failed_keeps_its_row_in_the_verdict():
+    """Every seed crashed: the row says so, where it vanished from the table (ok_records alone chose the rows)."""
+    import copy
+
+    from ddfbench.report import verdict
+
+    short = copy.deepcopy(compact.read_compact(os.path.join(ROOT, "reports", "default", compact.FILE)))
+    ddf_bunny = [r for r in short if r["model"] == "ddf_tuned" and r["shape"]["name"] == "bunny"]
+    for r in ddf_bunny:
+        r["status"] = "failed"
+    rows = {(r[0], r[1].split(":")[0]): r for r in verdict.rows(short, [])}
+    assert rows[("ddf_tuned", "short")][1] == "short: no run finished"
+    assert rows[("ddf_tuned", "short")][2] == f"failed ({len(ddf_bunny)} of {len(ddf_bunny)} runs)"

@@ -310,3 +310,21 @@ def test_a_refutation_at_the_equivalence_bound_is_holm_tested_at_that_bound_not_
     (row,) = claims.accurate_as_sdf_over_shapes({"shape_suite": out})
     assert row.verdict == claims.NOT_SEPARABLE, row.measured
     assert "against 1.5" in row.measured
+
+
+def test_a_confirmation_at_the_equivalence_bound_also_needs_its_holm_p():
+    """The mirror of the refutation above: an unadjusted interval just below 1.5 whose Holm p against 1.5 (the same
+    two-sided test, the same family member) is 0.093 is not separable, not confirmed."""
+    import numpy as np
+
+    from ddfbench.report import claims
+
+    logs = np.log(1.5) - np.array([0.05, 0.6, 0.1, 0.3, 0.12, 0.5])
+    grid = [0.5, 3.0, 0.6, 2.5, 0.7, 2.0]
+    out = []
+    for i, shape in enumerate(SHAPES):
+        out += [rec("neural_sdf_tuned", shape, 0, 1e-4), rec("ddf_tuned", shape, 0, 1e-4 * float(np.exp(logs[i]))),
+                rec("grid_sdf", shape, 0, 1e-4 * grid[i])]
+    (row,) = claims.accurate_as_sdf_over_shapes({"shape_suite": out})
+    assert "[0.893, 1.44]" in row.measured and "0.093 against 1.5" in row.measured
+    assert row.verdict == claims.NOT_SEPARABLE

@@ -288,13 +288,14 @@ def _over_shapes(r: across_shapes.OverShapes, unit: str = "shapes") -> str:
 def _as_accurate(ratio: across_shapes.OverShapes, p_holm: float | None = None) -> str:
     """Verdict of "a at least as accurate as b" from the chamfer ratio a/b: confirmed when its interval lies at or
     below EQUIVALENCE (a no more than EQUIVALENCE x worse, or better), refuted when it lies above; with p_holm (the
-    Holm-adjusted p of the t test of the ratio against EQUIVALENCE within a family of claims) a refutation also
-    needs p_holm < 0.05."""
-    if ratio.n < 2 or not math.isfinite(ratio.lo):
+    Holm-adjusted p of the t test of the ratio against EQUIVALENCE within a family of claims) either side also
+    needs p_holm < 0.05: the test is two-sided, so a confirmation below the bound is the same family member as a
+    refutation above it."""
+    if ratio.n < 2 or not math.isfinite(ratio.lo) or (p_holm is not None and not p_holm < 0.05):
         return NOT_SEPARABLE
     if ratio.hi <= EQUIVALENCE:
         return CONFIRMED
-    return REFUTED if ratio.lo > EQUIVALENCE and (p_holm is None or p_holm < 0.05) else NOT_SEPARABLE
+    return REFUTED if ratio.lo > EQUIVALENCE else NOT_SEPARABLE
 
 
 def accurate_as_sdf_over_shapes(records: Records) -> list[Claim]:
@@ -327,7 +328,7 @@ def accurate_as_sdf_over_shapes(records: Records) -> list[Claim]:
                   "gave a result",
                   verdict, f"Inference over shapes (ddfbench/report/across_shapes.py): geometric mean of per-shape "
                   f"ratios, t interval of the mean log ratio; p values Holm-corrected across the suite's family "
-                  f"ratios (one family of claims). {AS_ACCURATE_RULE} A refutation also needs the Holm p of the t test "
+                  f"ratios (one family of claims). {AS_ACCURATE_RULE} Either verdict also needs the Holm p of the t test "
                   f"of the ratio against {EQUIVALENCE:g} (this row's member of that family) below 0.05.")]
 
 

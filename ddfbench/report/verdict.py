@@ -108,7 +108,8 @@ def rows(short: list[Record], full: list[Record], frames: list[Record] = (),
     grid, epochs = ([r for r in recs if r.get("model") not in in_suite] for recs in (grid, epochs))
     budgets = ((short, "short", False), (full, "own", True), (epochs, "own", False), (grid, "same grid", True))
     over_shapes = [cells(recs, "chamfer_l2") if across else {} for recs, _, across in budgets]
-    family = {str(r.get("model")): str(r.get("family")) for r in ok_records([*short, *full, *epochs, *grid])}
+    # every model that ran, ok or not: a model whose every run failed still gets its rows
+    family = {str(r.get("model")): str(r.get("family")) for r in [*short, *full, *epochs, *grid]}
     models = sorted(family, key=lambda m: (FAMILY_ORDER.index(family[m]) if family[m] in FAMILY_ORDER
                                            else len(FAMILY_ORDER), m))
     out = []
@@ -116,14 +117,14 @@ def rows(short: list[Record], full: list[Record], frames: list[Record] = (),
         for (recs, label, _), over in zip(budgets, over_shapes):
             runs = [r for r in recs if r.get("model") == model and shape_name(r) == SHAPE]
             mine = ok_records(runs)
-            if not mine:
+            if not runs:
                 continue
-            budget = f"{label}: {_steps(mine)}"
+            budget = f"{label}: {_steps(mine) if mine else 'no run finished'}"
             failed = len(runs) - len(mine) + sum(no_result(r) for r in mine)  # a run that failed gave no result either
             if failed:
                 steps = sorted({(r.get("fit") or {}).get("steps") for r in mine})
-                how = NOT_CONVERGED if failed == len(runs) else "no result, not ranked"
-                out.append([model, budget, f"{how} ({failed} of {len(runs)} runs, steps {steps})"]
+                how = "failed" if not mine else NOT_CONVERGED if failed == len(runs) else "no result, not ranked"
+                out.append([model, budget, f"{how} ({failed} of {len(runs)} runs" + (f", steps {steps})" if steps else ")")]
                            + ["–"] * (len(HEADER) - 3))
                 continue
             suite = "–"
