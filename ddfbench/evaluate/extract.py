@@ -112,7 +112,8 @@ def _evaluate_carry(fn: Field, points: np.ndarray, parent: np.ndarray | None, ba
 
 
 def lattice(resolution: int, stride: int) -> np.ndarray:
-    """Axis indices of the lattice with the given stride: every stride-th node and the last one."""
+    """Axis indices (K,) int of the lattice with the given stride: every stride-th node of 0..resolution-1
+    and the last one."""
     return np.unique(np.r_[np.arange(0, resolution, stride), resolution - 1])
 
 
@@ -224,7 +225,9 @@ def sdf_to_mesh(fn: Field, resolution: int, domain: float, batch: int = 65536, c
 
 def udf_to_mesh(fn: Field, resolution: int, domain: float, level: float, batch: int = 65536, coarse: int = 1,
                 lipschitz: float = 1.0):
-    """Unsigned field -> marching cubes at a small positive `level` (a shell around the surface)."""
+    """Unsigned field fn(points (N, 3) float32) -> (N,) -> marching cubes of the (R, R, R) grid over
+    [-domain, domain]^3 at a small positive `level` (normalized units: a shell around the surface)
+    -> (mesh, info), as sdf_to_mesh; InputError unless level > 0."""
     if not level > 0:
         raise InputError(f"udf level {level}: must be > 0 (an unsigned field never crosses 0)")
     return _level_mesh(fn, resolution, domain, float(level), batch, coarse, lipschitz, carry=False)

@@ -46,8 +46,8 @@ def chamfer_l1_of(d_ab: np.ndarray, d_ba: np.ndarray) -> float:
 
 
 def f_score_of(d_pred_gt: np.ndarray, d_gt_pred: np.ndarray, radius: float) -> float:
-    """F = 2PR/(P+R) from nearest distances pred→GT (precision P: share within radius) and GT→pred
-    (recall R); 0 where P+R = 0."""
+    """F = 2PR/(P+R) from unsquared nearest distances pred→GT d_pred_gt (N,) (precision P: share within
+    radius) and GT→pred d_gt_pred (M,) (recall R); radius unsquared, in normalized units; 0 where P+R = 0."""
     p, r = float((d_pred_gt <= radius).mean()), float((d_gt_pred <= radius).mean())
     return 0.0 if p + r == 0 else 2 * p * r / (p + r)
 

@@ -119,7 +119,9 @@ class TraceResult:
 
 def sphere_trace(field: TorchField, origins: np.ndarray, directions: np.ndarray, domain: float,
                  options: TraceOptions | None = None, device: str | torch.device = "cpu") -> TraceResult:
-    """Trace N rays, origins (N, 3) and unit directions (N, 3), through `field` (see module docstring)."""
+    """Trace N rays, origins (N, 3) and unit directions (N, 3), through `field` clipped to the box
+    [-domain, domain]^3 (normalized units; see module docstring) -> TraceResult: t (N,) float32 distance
+    along the ray (inf unless hit), hit (N,) bool, status (N,) int8 RayStatus and the work counts."""
     opt = options or TraceOptions()
     opt.check()
     dev = torch.device(device)

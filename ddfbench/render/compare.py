@@ -22,7 +22,8 @@ PSNR_CAP = 100.0
 
 
 def psnr(reference: np.ndarray, image: np.ndarray) -> float:
-    """PSNR in dB of two linear images of equal shape, clipped to [0, 1]; PSNR_CAP when identical."""
+    """PSNR in dB of two linear images of equal shape (e.g. (C,H,W,3)), clipped to [0, 1]; PSNR_CAP when
+    identical."""
     mse = float(np.mean((np.clip(reference, 0, 1) - np.clip(image, 0, 1)) ** 2))
     return PSNR_CAP if mse <= 10 ** (-PSNR_CAP / 10) else 10 * math.log10(1 / mse)
 
@@ -34,7 +35,9 @@ def normal_angles_deg(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 
 def image_metrics(reference: Frames, frames: Frames, outputs: frozenset[str]) -> dict[str, Any]:
-    """The metrics the requested outputs allow (module docstring)."""
+    """Metrics of `frames` against `reference` (same cameras; Frames: depth, mask (C,H,W), normal (C,H,W,3),
+    images name -> (C,H,W,3)) -> dict: mask_iou, depth_pixels_compared, depth_mae, normal_angle_deg as
+    `outputs` allow, and psnr_<image> per image of frames (module docstring)."""
     out: dict[str, Any] = {}
     both = reference.mask & frames.mask
     if "mask" in outputs:

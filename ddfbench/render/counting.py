@@ -62,7 +62,8 @@ class CountedTracer:
         self.counts.update(intersect_calls=0, undecided_rays=0)
 
     def cast(self, kind: str, origins: np.ndarray, directions: np.ndarray, normals: bool) -> Hits:
-        """First hits of rays (N,3) origins and unit directions, tallied under `<kind>_rays`."""
+        """First hits of rays (N,3) origins and unit directions, tallied under `<kind>_rays` -> cleaned Hits of N
+        rays (clean_hits); normals=False lets the family skip normal work (hit normals then fall back to −d)."""
         if kind not in RAY_KINDS:
             raise ValueError(f"ray kind {kind!r}: unknown ({', '.join(RAY_KINDS)})")
         origins = np.ascontiguousarray(origins, np.float32).reshape(-1, 3)

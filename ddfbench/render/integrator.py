@@ -141,7 +141,9 @@ def _bounces(tracer: CountedTracer, scene: Scene, passes: Passes, radiance: np.n
 
 
 def render(rep: Representation, scene: Scene, passes: Passes, seed: int) -> tuple[Frames, dict[str, int]]:
-    """Render every camera of `scene` with the passes given; return the frames and the counts."""
+    """Render every camera of `scene` with the passes given -> (Frames (C,H,W) images, see Frames; counts:
+    `<kind>_rays` for primary / shadow / bounce, field_evals, backward_passes, trace_steps, intersect_calls,
+    undecided_rays and any numeric stat a family adds)."""
     tracer = CountedTracer(rep, scene.chunk)
     c, s, h, w = len(scene.cameras), scene.spp, scene.height, scene.width
     origins, directions = primary_rays(scene, seed)

@@ -221,7 +221,8 @@ class Oracle:
         return np.concatenate(out) if out else np.zeros(0, np.float32)
 
     def occupancy(self, points: np.ndarray, seed: int = 0) -> np.ndarray:
-        """Inside test (N,) bool: majority of the crossing parities of `occupancy_rays` rays per point.
+        """Inside test (N,) bool of points (N,3) in the normalized frame (any point, e.g. the field box of
+        half-side 0.6): majority of the crossing parities of `occupancy_rays` rays per point.
 
         Every point draws its own seeded random directions: open3d's compute_occupancy reuses a few
         directions for all points, so on a mesh with holes its mistakes cluster in whole regions.
@@ -247,14 +248,16 @@ class Oracle:
                                for _, rays in _ray_chunks(origins, directions)] or [np.zeros(0, np.int64)])
 
     def unsigned_distance(self, points: np.ndarray) -> np.ndarray:
-        """Exact distance to the surface (N,) float32."""
+        """Exact distance to the surface (N,) float32 of points (N,3), both in the normalized frame (any point,
+        e.g. the field box of half-side 0.6)."""
         if self._warp is not None:
             p = _f32(points).reshape(-1, 3)
             return np.linalg.norm(self.closest_point(p)[0] - p, axis=1).astype(np.float32)
         return self._points(self._scene.compute_distance, points).astype(np.float32)
 
     def signed_distance(self, points: np.ndarray) -> np.ndarray:
-        """Exact distance, negative inside (voted inside test) (N,) float32."""
+        """Exact distance (N,) float32 of points (N,3), negative inside (voted inside test, occupancy); normalized
+        frame, as unsigned_distance."""
         dist = self.unsigned_distance(points)
         return np.where(self.occupancy(points), -dist, dist).astype(np.float32)
 
