@@ -23,7 +23,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from ddfbench.core import plugins
 from ddfbench.core.plugins import CONF_DIR  # plugins registers the `members` resolver the experiments use
-from ddfbench.run.overrides import MULTIRUN_FLAGS, check_overrides
+from ddfbench.run.overrides import MULTIRUN_FLAGS, check_overrides, values_of
 
 INTERRUPTED = ("interrupted; run the same command again to go on (finished runs are skipped, a fit resumes from its "
                "last checkpoint)")
@@ -142,14 +142,13 @@ def sweeps(args: list[str]) -> bool:
     hydra.mode=RUN."""
     if any(a in MULTIRUN_FLAGS for a in args):
         return True
-    return "hydra.mode=RUN" not in args and (any(a.lstrip("+").startswith("experiment=") for a in args)
-                                             or wants_default_experiment(args))
+    return "hydra.mode=RUN" not in args and (bool(values_of(args, "experiment")) or wants_default_experiment(args))
 
 
 def _chosen(group: str, args: list[str]) -> list[str] | None:
     """The configs of `group` the command names: one (`model=ddf_paper`) or a plain list (`model=mesh,grid_sdf`);
     None where it names none or a glob, range or interpolation (an experiment's own list: any config may run)."""
-    chosen = [a.split("=", 1)[1] for a in args if a.lstrip("+").startswith(f"{group}=")]
+    chosen = values_of(args, group)
     if len(chosen) == 1 and re.fullmatch(r"[\w.-]+(,[\w.-]+)*", chosen[0]):
         return chosen[0].split(",")
     return None
@@ -302,8 +301,7 @@ def check_extras(args: list[str]) -> None:
 
     from ddfbench.core.errors import InputError
 
-    for arg in args:
-        name = arg.split("=", 1)[1] if arg.lstrip("+").startswith("experiment=") else None
+    for name in values_of(args, "experiment"):
         if name in EXTRA_OF_EXPERIMENT and importlib.util.find_spec(EXTRA_OF_EXPERIMENT[name][0]) is None:
             raise InputError(f"+experiment={name}: needs the `{EXTRA_OF_EXPERIMENT[name][1]}` extra "
                              f"(pip install -e \".[{EXTRA_OF_EXPERIMENT[name][1]}]\")")
@@ -312,12 +310,12 @@ def check_extras(args: list[str]) -> None:
 def check_tune(args: list[str]) -> None:
     """+experiment=tune studies one model: a one-line InputError when the command names none, or one whose YAML
     declares no search space (the Optuna sweeper would end in a traceback)."""
-    if not any(a.lstrip("+") == "experiment=tune" for a in args):
+    if "tune" not in values_of(args, "experiment"):
         return
     from ddfbench.core.errors import InputError
     from ddfbench.fit.tune import EXPERIMENT, search_space
 
-    models = [a.split("=", 1)[1] for a in args if a.lstrip("+").startswith("model=")]
+    models = values_of(args, "model")
     studied = ", ".join(plugins.members("model", EXPERIMENT))
     if len(models) != 1 or "," in models[0]:
         raise InputError(f"+experiment={EXPERIMENT}: name one model to study (model=<name>; models with a search "
@@ -357,7 +355,7 @@ def check_out_dir(args: list[str]) -> None:
 def experiment_help(args: list[str]) -> str | None:
     """`--help` with `+experiment=NAME`: the experiment file's own description (its header comment), what its
     sweep varies and how many jobs these arguments give; None without an experiment (Hydra's page then)."""
-    names = [a.split("=", 1)[1] for a in args if a.lstrip("+").startswith("experiment=")]
+    names = values_of(args, "experiment")
     if not names:
         return None
     from ddfbench.core.errors import InputError

@@ -5,7 +5,7 @@ import pytest
 
 from ddfbench import cli
 from ddfbench.core.errors import InputError
-from ddfbench.run.overrides import check_overrides
+from ddfbench.run.overrides import check_overrides, values_of
 
 
 @pytest.mark.parametrize("arg,line", [
@@ -68,3 +68,12 @@ def test_a_tuning_study_names_one_model_with_a_search_space():
     cli.check_tune(["+experiment=tune", "model=ddf"])
     cli.check_tune(["model=mesh"])  # not a study
 
+
+
+def test_values_of_a_key_are_those_its_words_give_in_order():
+    args = ["model=mesh,grid_sdf", "+experiment=tune", "++capacity=s", "~capacity=m", "-m", "model.lr=1e-3",
+            "capacity=l=1"]
+    assert values_of(args, "model") == ["mesh,grid_sdf"]
+    assert values_of(args, "experiment") == ["tune"]
+    assert values_of(args, "capacity") == ["s", "l=1"]  # `~` deletes: no value; the value keeps its own `=`
+    assert values_of(args, "seed") == []

@@ -62,8 +62,9 @@ def _experiment_file(records: list[dict[str, Any]], experiment: str) -> str:
     """The conf/experiment file the runs were launched with (their `+experiment=NAME` override), which picks
     the report's plots and sections: a sweep renamed by experiment_name (gan_epochs_b256) keeps its file's
     sections. The experiment's name where no run names a file."""
-    files = Counter(o.split("=", 1)[1] for r in records for o in r.get("overrides") or []
-                    if o.lstrip("+").startswith("experiment="))
+    from ddfbench.run.overrides import values_of  # imports Hydra's override parser: only when asked
+
+    files = Counter(name for r in records for name in values_of(r.get("overrides") or [], "experiment"))
     return files.most_common(1)[0][0] if files else experiment
 
 

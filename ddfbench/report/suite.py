@@ -153,7 +153,9 @@ def _seconds(rec: dict[str, Any]) -> float | None:
 
 def _capacity(overrides: list[str]) -> str:
     """The capacity level a command line sets ("" when none)."""
-    return next((o.split("=", 1)[1] for o in overrides if o.lstrip("+").startswith("capacity=")), "")
+    from ddfbench.run.overrides import values_of  # imports Hydra's override parser: only when asked
+
+    return next(iter(values_of(overrides, "capacity")), "")
 
 
 def _level(rec: dict[str, Any]) -> str:

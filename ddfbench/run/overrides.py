@@ -28,6 +28,12 @@ def is_override(arg: str) -> bool:
     return "=" in arg and not arg.startswith("-")
 
 
+def values_of(args: list[str], key: str) -> list[str]:
+    """The values the words of a command line give `key` (`key=v`, `+key=v`, `++key=v`), in their order, as written
+    (not parsed); a `~key` deletion gives none."""
+    return [a.split("=", 1)[1] for a in args if a.lstrip("+").startswith(f"{key}=")]
+
+
 def parsed(arg: str) -> Override:
     """The override as Hydra reads it; a one-line InputError where it cannot."""
     try:
