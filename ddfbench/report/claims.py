@@ -50,6 +50,7 @@ from ddfbench.report.records import (
     shape_name,
 )
 from ddfbench.report.stats import Summary, holm, sig3, summarize_values, t_test_p, welch_ratio, within_range
+from ddfbench.report.tables import pipe_lines
 from ddfbench.run.runs import code_commits, find_records
 
 CONFIRMED, REFUTED, NOT_SEPARABLE, NOT_TESTABLE, NO_RECORDS, NOT_CONVERGED = (
@@ -848,11 +849,11 @@ def to_markdown(claims: list[Claim], records: Records, source: str, carried_from
              "correction within each family of claims: Table II's three orderings, Fig. 6's three, the shape "
              "suite's six family ratios (the rows give p and Holm p). Verdicts: confirmed / refuted (the interval lies on one side), "
              "not separable at n (it straddles), not testable here (why is given), no records, not converged (every "
-             "run's mesh was empty or off the shape: not a method result).", "",
-             "| claim | source | the paper says | ddfbench measured | experiment / rows | verdict | conventions |",
-             "|---|---|---|---|---|---|---|"]
-    lines += ["| " + " | ".join(cell(x) for x in (c.claim, c.source, c.paper, c.measured, c.rows, f"**{c.verdict}**",
-                                                  c.convention)) + " |" for c in claims]
+             "run's mesh was empty or off the shape: not a method result).", ""]
+    lines += pipe_lines(["claim", "source", "the paper says", "ddfbench measured", "experiment / rows", "verdict",
+                         "conventions"],
+                        [[cell(x) for x in (c.claim, c.source, c.paper, c.measured, c.rows, f"**{c.verdict}**",
+                                            c.convention)] for c in claims])
     return "\n".join(lines) + "\n"
 
 

@@ -18,6 +18,7 @@ import numpy as np
 from ddfbench.evaluate.metric_registry import by_name
 from ddfbench.report.records import OFF_SHAPE_RULE, Record, empty_mesh, off_shape, ok_records, shape_name
 from ddfbench.report.stats import sig3
+from ddfbench.report.tables import pipe_lines
 
 FLOOR_MULTIPLES = (5.0, 2.0)  # time-to-reach k x the chamfer noise floor
 NOT_REACHED = "not reached"
@@ -96,15 +97,16 @@ def time_to_floor_rows(records: list[Record], metric: str = "chamfer_l2") -> lis
 def to_markdown(rows: list[dict[str, Any]]) -> str:
     """The time-to-floor table (chamfer L2)."""
     ks = FLOOR_MULTIPLES
-    lines = ["| model | shape | seeds | floor ×10³ | " + " | ".join(f"time to {k:g}× floor (s)" for k in ks)
-             + " | last probe (s) |", "|---" * (5 + len(ks)) + "|"]
+    header = ["model", "shape", "seeds", "floor ×10³", *(f"time to {k:g}× floor (s)" for k in ks), "last probe (s)"]
+    cells = []
     for r in rows:
-        cells = []
+        times = []
         for k in ks:
             s = r[f"median_s_{k:g}x"]
-            cells.append((f"{s:.3g}" if math.isfinite(s) else NOT_REACHED) + f" ({r[f'reached_{k:g}x']}/{r['n']})")
-        lines.append(f"| {r['model']} | {r['shape']} | {r['n']} | {r['floor'] * 1e3:.4g} | " + " | ".join(cells)
-                     + (f" | {r['budget_s']:.0f} |" if math.isfinite(r["budget_s"]) else " | – |"))
+            times.append((f"{s:.3g}" if math.isfinite(s) else NOT_REACHED) + f" ({r[f'reached_{k:g}x']}/{r['n']})")
+        cells.append([f"{r['model']}", f"{r['shape']}", f"{r['n']}", f"{r['floor'] * 1e3:.4g}", *times,
+                      f"{r['budget_s']:.0f}" if math.isfinite(r["budget_s"]) else "–"])
+    lines = pipe_lines(header, cells)
     lines += ["", "Seconds of training (probes excluded) at the first probe whose chamfer L2 is at most k × the "
               "noise floor; median over seeds (the lower of the middle two at an even count), (reached/seeds); "
               "'not reached' where fewer than half the seeds got there within the budget. Probes are log-spaced, so "

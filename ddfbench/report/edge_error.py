@@ -40,7 +40,7 @@ from ddfbench.report import measured
 from ddfbench.report.records import no_result
 from ddfbench.report.reevaluate import artifact, finished_records, unreadable
 from ddfbench.report.stats import summarize_values, within_range
-from ddfbench.report.tables import NOT_CONVERGED
+from ddfbench.report.tables import NOT_CONVERGED, pipe_lines
 from ddfbench.run.checks import writable_folder
 
 BANDS = (("edge", 0.0), ("near", 2.0), ("mid", 4.0), ("far", math.inf))  # name, largest distance (px)
@@ -161,12 +161,12 @@ def _cell(values: pd.Series, key: str, scale: float, runs: int) -> str:
 
 def to_markdown(runs: pd.DataFrame) -> str:
     """One row per model, shape and capacity: each figure's mean ± std [95 % t interval] over the runs (seeds), n."""
-    lines = ["| model | shape | capacity | n | " + " | ".join(title for _, title, _ in COLUMNS) + " |",
-             "|---" * (4 + len(COLUMNS)) + "|"]
+    rows = []
     for (model, shape, capacity), group in runs.groupby(["model", "shape", "capacity"], sort=True):
         cells = [_cell(group[key], key, scale, len(group)) for key, _, scale in COLUMNS]
         n = f"{len(group)} {NOT_CONVERGED}" if group["no_result"].all() else str(len(group))
-        lines.append(f"| {model} | {shape} | {capacity} | {n} | " + " | ".join(cells) + " |")
+        rows.append([f"{model}", f"{shape}", f"{capacity}", n, *cells])
+    lines = pipe_lines(["model", "shape", "capacity", "n", *(title for _, title, _ in COLUMNS)], rows)
     lines += ["", "An edge pixel is one of the oracle's frame where the hit mask changes or the depth jumps (module "
               "docstring of ddfbench/report/edge_error.py); '≤ 2 px': within 2 pixels of one. 'mask errors': pixels exactly one "
               "render hits; 'summed depth error': Σ|t − t_ref| over the pixels both hit. depth MAE and mask IoU over all "

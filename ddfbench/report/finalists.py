@@ -32,6 +32,7 @@ from ddfbench.report.across_shapes import OverShapes, exponentiated, fmt, geomet
 from ddfbench.report.paired import log_ratio
 from ddfbench.report.records import Record, no_result, ok_records, shape_name
 from ddfbench.report.shape_suite import cells_without_result
+from ddfbench.report.tables import pipe_lines
 
 CHAMFER = "chamfer_l2"
 INCUMBENT = "a"  # the level that is the preset as the experiments run it (each model YAML keeps its preset as a: {})
@@ -232,11 +233,10 @@ def sections(records: list[Record]) -> list[str]:
              f"Seeds {', '.join(map(str, chosen))}. score: geometric mean over the tuning shapes of the mean CD-L2 "
              "×10³ over seeds, with the t interval of the mean log over shapes (n: shapes where every run gave a "
              "result). Fixed work: steps as run. The table above holds these seeds' runs; the confirmation's, on "
-             "fresh seeds, are in its section.", "",
-             "| model | level | score CD-L2 ×10³ [95 %] | runs | steps | a run with no result on |",
-             "|---|---|---|---|---|---|"]
-    lines += [f"| {r['model']} | {r['level']} | {fmt(r['score'], 1e3)} | {r['runs']} | {r['steps']:,} | "
-              f"{', '.join(r['no_result_on']) or '–'} |" for r in rows]
+             "fresh seeds, are in its section.", ""]
+    lines += pipe_lines(["model", "level", "score CD-L2 ×10³ [95 %]", "runs", "steps", "a run with no result on"],
+                        [[f"{r['model']}", f"{r['level']}", fmt(r["score"], 1e3), f"{r['runs']}", f"{r['steps']:,}",
+                          ", ".join(r["no_result_on"]) or "–"] for r in rows])
     lines += ["", "## Winner against runner-up", "",
               "Ratio of CD-L2 winner / runner-up: by shape (geometric mean of per-shape ratios of seed means, t "
               "interval over shapes) and by run (paired shape x seed, t interval over runs). The winner is "
@@ -248,16 +248,17 @@ def sections(records: list[Record]) -> list[str]:
               "not kept: the winner replaces it, separable or not; a miss in some runs only does not replace it "
               "(one-off misses of the GAN's candidates on the cow, at c020f6c and at dc0a417, did not repeat in the "
               "other run).",
-              "",
-              "| model | winner | runner-up | by shape [95 %] | by run [95 %] | separable | preset to use |",
-              "|---|---|---|---|---|---|---|"]
+              ""]
+    verdicts = []
     for v in run["verdicts"]:
         if v["runner_up"] is None:
             winner = v["winner"] or "no candidate had a result in every run"
-            lines.append(f"| {v['model']} | {winner} | – | – | – | – | {preset_to_use(v)} |")
+            verdicts.append([f"{v['model']}", f"{winner}", "–", "–", "–", "–", f"{preset_to_use(v)}"])
             continue
-        lines.append(f"| {v['model']} | {v['winner']} | {v['runner_up']} | {fmt(v['by_shape'])} | "
-                     f"{fmt(v['by_run'])} | {'yes' if v['separable'] else 'no'} | {preset_to_use(v)} |")
+        verdicts.append([f"{v['model']}", f"{v['winner']}", f"{v['runner_up']}", f"{fmt(v['by_shape'])}",
+                         f"{fmt(v['by_run'])}", "yes" if v["separable"] else "no", f"{preset_to_use(v)}"])
+    lines += pipe_lines(["model", "winner", "runner-up", "by shape [95 %]", "by run [95 %]", "separable",
+                         "preset to use"], verdicts)
     checks = [v for v in run["verdicts"] if "confirm" in v]
     if checks:
         lines += ["", "## Confirmation on fresh seeds", "",
@@ -266,23 +267,24 @@ def sections(records: list[Record]) -> list[str]:
                   "runs that gave a result. Confirmed when every run of that grid has a record, the winner has a "
                   "result in each of its runs and the by-shape interval over the other shapes lies below 1 or the "
                   "incumbent gave no result on a shape in any of its runs there (as in the selection, it then gives "
-                  "way); pending while runs are missing (the command runs them).", "",
-                  "| model | winner / incumbent | seeds | by shape [95 %] | by run [95 %] | "
-                  "winner's run with no result on | confirmed |", "|---|---|---|---|---|---|---|"]
+                  "way); pending while runs are missing (the command runs them).", ""]
+        confirmations = []
         for v in checks:
             c = v["confirm"]
             seeds = ", ".join(map(str, c["seeds"]))
             if c["missing"]:
                 command = " ".join(["python -m ddfbench", *_confirmation_sweep(v, c)])
-                lines.append(f"| {v['model']} | {v['winner']} / {INCUMBENT} | {seeds} | pending: {c['missing']} of "
-                             f"{c['runs']} runs without a record: `{command}` | – | – | – |")
+                confirmations.append([f"{v['model']}", f"{v['winner']} / {INCUMBENT}", seeds,
+                                      f"pending: {c['missing']} of {c['runs']} runs without a record: `{command}`",
+                                      "–", "–", "–"])
                 continue
-            lines.append(f"| {v['model']} | {v['winner']} / {INCUMBENT} | {seeds} | {fmt(c['by_shape'])} | "
-                         f"{fmt(c['by_run'])} | {', '.join(c['no_result_on']) or '–'} | "
-                         f"{'yes' if c['confirmed'] else 'no'} |")
-        lines += ["", "The confirmation's runs (CD-L2 ×10³: mean over the runs with a result):", "",
-                  "| model | level | shape | seeds | CD-L2 ×10³ | no result | record keys |",
-                  "|---|---|---|---|---|---|---|"]
+            confirmations.append([f"{v['model']}", f"{v['winner']} / {INCUMBENT}", seeds, f"{fmt(c['by_shape'])}",
+                                  f"{fmt(c['by_run'])}", ", ".join(c["no_result_on"]) or "–",
+                                  "yes" if c["confirmed"] else "no"])
+        lines += pipe_lines(["model", "winner / incumbent", "seeds", "by shape [95 %]", "by run [95 %]",
+                             "winner's run with no result on", "confirmed"], confirmations)
+        lines += ["", "The confirmation's runs (CD-L2 ×10³: mean over the runs with a result):", ""]
+        confirmation_runs = []
         read = by_name()[CHAMFER].read
         for v in checks:
             for level in (INCUMBENT, v["winner"]):
@@ -292,10 +294,13 @@ def sections(records: list[Record]) -> list[str]:
                     if not runs:
                         continue
                     kept = shape_means((shape, read(r)) for r in ok_records(runs) if not no_result(r)).get(shape)
-                    lines.append(f"| {v['model']} | {level} | {shape} | {', '.join(str(seed(r)) for r in runs)} | "
-                                 f"{'–' if kept is None else f'{kept * 1e3:.3g}'} | "
-                                 f"{sum(r.get('status') != 'ok' or no_result(r) for r in runs)} | "
-                                 f"{' '.join(str(r.get('key')) for r in runs)} |")
+                    confirmation_runs.append([f"{v['model']}", f"{level}", f"{shape}",
+                                              ", ".join(str(seed(r)) for r in runs),
+                                              "–" if kept is None else f"{kept * 1e3:.3g}",
+                                              f"{sum(r.get('status') != 'ok' or no_result(r) for r in runs)}",
+                                              " ".join(str(r.get("key")) for r in runs)])
+        lines += pipe_lines(["model", "level", "shape", "seeds", "CD-L2 ×10³", "no result", "record keys"],
+                            confirmation_runs)
     used = {id(r) for v in checks for r in v["confirm"]["records"]}
     other = [r for r in run["fresh"] if id(r) not in used]
     if other:

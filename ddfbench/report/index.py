@@ -22,6 +22,7 @@ from dataclasses import dataclass
 from ddfbench.report import compact, measured
 from ddfbench.report import tune as tune_report
 from ddfbench.report.suite import ROOT, load_suite
+from ddfbench.report.tables import pipe_lines
 from ddfbench.run.runs import code_commits
 
 FILE = "index.md"
@@ -108,8 +109,8 @@ def render_index(reports: str, suite: str = "v1") -> str:
     order = {name: i for i, name in enumerate(tiers)}
     folders = sorted(report_folders(reports), key=lambda f: (order.get(f, len(order)), f))
     found = {name: provenance(os.path.join(reports, name)) for name in folders}
-    rows = [f"| [`{name}/`]({name}/) | {f'{suite} {tiers[name]}' if name in tiers else '–'} | "
-            f"{p.runs if p.runs is not None else '–'} | {', '.join(p.commits) or '–'} | {p.regenerates} |"
+    rows = [[f"[`{name}/`]({name}/)", f"{suite} {tiers[name]}" if name in tiers else "–",
+             f"{p.runs if p.runs is not None else '–'}", ", ".join(p.commits) or "–", f"{p.regenerates}"]
             for name, p in found.items()]
     done = sum(p.regenerates == REGENERATES for p in found.values())
     from_rows = sum(p.regenerates == FROM_ROWS for p in found.values())
@@ -127,9 +128,7 @@ def render_index(reports: str, suite: str = "v1") -> str:
         f"Suite {suite}'s tiers: `conf/suite/{suite}.yaml` (`python -m ddfbench.suite status "
         f"{suite}` says which are stale). Timing benches (`bench/`) keep their raw JSON beside each table.",
         "",
-        "| report | suite tier | runs | code | regenerates from records |",
-        "|---|---|---|---|---|",
-        *rows,
+        *pipe_lines(["report", "suite tier", "runs", "code", "regenerates from records"], rows),
         "",
     ])
 

@@ -27,7 +27,7 @@ from ddfbench.core.atomic import write_atomic
 from ddfbench.core.errors import InputError
 from ddfbench.report import compact
 from ddfbench.report.stats import sig3, summarize_values
-from ddfbench.report.tables import override_labels
+from ddfbench.report.tables import override_labels, pipe_lines
 
 REFERENCE = "ddf_tuned"  # the DDF that render_time runs (its tuned preset); tests check it is a member
 ERROR, SPEED = ("metrics", "depth_mae"), ("cost", "render_warm_s")
@@ -115,14 +115,15 @@ def to_markdown(df: pd.DataFrame) -> str:
     """The matched table as markdown, one line per (shape, size, reference, family)."""
     header = ["shape", "size", "DDF depth err ×10³", "DDF warm s", "family", "default setting",
               "depth err ×10³", "warm s", "× DDF time", "matched setting", "depth err ×10³", "warm s", "× DDF time"]
-    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    rows = []
     for _, r in df.iterrows():
         matched = r["matched_setting"] if r["matched_reached"] else f"{NOT_REACHED} (most accurate: {r['matched_setting']})"
-        lines.append("| " + " | ".join([
+        rows.append([
             str(r["shape"]), str(r["size"]), sig3(r["reference_depth_mae"], 1e3), sig3(r["reference_warm_s"]),
             str(r["family"]), str(r["default_setting"]), sig3(r["default_depth_mae"], 1e3), sig3(r["default_warm_s"]),
             sig3(r["default_speedup"]), matched, sig3(r["matched_depth_mae"], 1e3), sig3(r["matched_warm_s"]),
-            sig3(r["matched_speedup"])]) + " |")
+            sig3(r["matched_speedup"])])
+    lines = pipe_lines(header, rows)
     lines += ["", "Means over seeds (n in table.csv). × DDF time: the family's warm render time over the DDF's "
               "(> 1: the DDF is faster). Matched: the family's fastest setting whose mean depth error is at most "
               "the DDF's; 'not reached': no setting is that accurate."]

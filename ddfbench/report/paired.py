@@ -16,6 +16,7 @@ import numpy as np
 from ddfbench.evaluate.metric_registry import Metric, by_name
 from ddfbench.report.records import SURFACE_FACTORS, Record, ok_records
 from ddfbench.report.stats import Summary, holm, sig3, summarize_values, t_test_p
+from ddfbench.report.tables import pipe_lines
 
 
 def values(records: Iterable[Record], metric: str | Metric, select: Callable[[Record], bool],
@@ -64,15 +65,16 @@ def to_markdown(rows: list[dict[str, Any]], metric: str, baseline: str, what: st
     lines = [f"Paired against **{baseline}** ({what}): {m.label} difference (setting − baseline) and ratio "
              f"(geometric mean of setting / baseline), each with its 95 % t interval over the pairs. Separated: the "
              f"ratio's two-sided p (t test of the mean log ratio against 0), Holm-adjusted across the table's "
-             f"{sum(math.isfinite(p) for p in ps)} settings, is below 0.05.", "",
-             "| setting | pairs | difference | 95 % interval | ratio | 95 % interval | p, Holm | separated from 1 |",
-             "|---|---|---|---|---|---|---|---|"]
+             f"{sum(math.isfinite(p) for p in ps)} settings, is below 0.05.", ""]
+    cells = []
     for row, p, p_holm in zip(rows, ps, holm(ps)):
         d, r = row["diff"], row["ratio"]
-        sep = "yes" if p_holm < 0.05 else "no"
-        lines.append(f"| {row['setting']} | {d.n} | {sig3(d.mean, m.scale)} | [{sig3(d.lo, m.scale)}, "
-                     f"{sig3(d.hi, m.scale)}] | {sig3(np.exp(r.mean), 1)} | [{sig3(np.exp(r.lo), 1)}, "
-                     f"{sig3(np.exp(r.hi), 1)}] | {sig3(p, 1)}, {sig3(p_holm, 1)} | {sep} |")
+        cells.append([f"{row['setting']}", f"{d.n}", sig3(d.mean, m.scale),
+                      f"[{sig3(d.lo, m.scale)}, {sig3(d.hi, m.scale)}]", sig3(np.exp(r.mean), 1),
+                      f"[{sig3(np.exp(r.lo), 1)}, {sig3(np.exp(r.hi), 1)}]",
+                      f"{sig3(p, 1)}, {sig3(p_holm, 1)}", "yes" if p_holm < 0.05 else "no"])
+    lines += pipe_lines(["setting", "pairs", "difference", "95 % interval", "ratio", "95 % interval", "p, Holm",
+                         "separated from 1"], cells)
     return "\n".join(lines) + "\n"
 
 

@@ -336,19 +336,21 @@ def _footnotes(df: pd.DataFrame) -> list[str]:
     return lines
 
 
-def pipe_table(header: list[str], rows: list[list[str]]) -> str:
+def pipe_lines(header: list[str], rows: Iterable[list[str]]) -> list[str]:
+    """The lines of pipe_table, without line ends: a table among a report's other markdown lines."""
+    return ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)] + ["| " + " | ".join(r) + " |" for r in rows]
+
+
+def pipe_table(header: list[str], rows: Iterable[list[str]]) -> str:
     """A GitHub markdown table of string cells (header, then one line per row)."""
-    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
-    return "\n".join(lines + ["| " + " | ".join(r) + " |" for r in rows]) + "\n"
+    return "\n".join(pipe_lines(header, rows)) + "\n"
 
 
 def to_markdown(df: pd.DataFrame) -> str:
     """A GitHub markdown table, best per column (per shape) in bold, noise floor rows, failures below."""
     if df.empty:
         return "_no records_\n"
-    header, body = _cells(df, ("**", "**"))
-    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
-    lines += ["| " + " | ".join(r) + " |" for r in body]
+    lines = pipe_lines(*_cells(df, ("**", "**")))
     per_shape = " per shape" if df["shape"].nunique() > 1 else ""
     lines += ["", f"Mean ± std over seeds, n runs; {_points_phrase(df)}. Bold: best per column{per_shape}, its {INTERVAL_NAME} "
               f"(table.csv: _ci_lo, _ci_hi; cut to the metric's range) overlapping no other row's; {TIE}: tied, the intervals of these "

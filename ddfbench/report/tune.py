@@ -37,6 +37,7 @@ from ddfbench.evaluate.metric_registry import objective_value
 from ddfbench.fit.tune import search_space
 from ddfbench.report.checked_json import checked_json_object
 from ddfbench.report.compact import folders_holding
+from ddfbench.report.tables import pipe_lines
 from ddfbench.run.checks import writable_folder
 from ddfbench.run.runs import code_commits, find_records
 
@@ -123,8 +124,8 @@ def best(df: pd.DataFrame, head: dict[str, Any]) -> list[str]:
         if len(preset):
             lines += [f"The preset's own values at the same budget: CD-L2 x10^3 {preset['objective'].iloc[0]:.4g} "
                       f"({int(preset['steps'].iloc[0])} steps).", ""]
-        lines += ["| key | best | preset |", "|---|---|---|"]
-        lines += [f"| {path} | {top[path]} | {value} |" for path, value in head["presets"][model].items()]
+        lines += pipe_lines(["key", "best", "preset"],
+                            [[f"{path}", f"{top[path]}", f"{value}"] for path, value in head["presets"][model].items()])
         lines.append("")
     return lines
 
@@ -133,8 +134,9 @@ def space_lines(spaces: dict[str, dict[str, list[Any]]]) -> list[str]:
     """Markdown lines: each model's search space, one row per drawn key."""
     lines = ["# Search spaces (conf/model/<model>.yaml, experiments.tune)", ""]
     for model, space in spaces.items():
-        lines += [f"## {model}", "", "| key | distribution | values |", "|---|---|---|"]
-        lines += [f"| {p} | {k} | {v} |" for p, (k, v) in space.items()]
+        lines += [f"## {model}", ""]
+        lines += pipe_lines(["key", "distribution", "values"],
+                            [[f"{p}", f"{k}", f"{v}"] for p, (k, v) in space.items()])
         lines.append("")
     return lines
 

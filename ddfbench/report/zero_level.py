@@ -52,6 +52,7 @@ from ddfbench.report.reevaluate import (
     saved_model,
     unreadable,
 )
+from ddfbench.report.tables import pipe_lines
 from ddfbench.run.checks import writable_folder
 
 PERCENTILES = (5, 25, 50, 75, 95)
@@ -112,17 +113,18 @@ def zero_level_row(rec: dict[str, Any], n_points: int) -> dict[str, Any]:
 
 def to_markdown(rows: list[dict[str, Any]]) -> str:
     """The per-run table: offsets ×10³ (unit-cube units), the median level, and CD-L2 ×10³ / F@0.01 at each level."""
-    lines = ["| model | shape | capacity | seed | offset ×10³ p5 / p25 / p50 / p75 / p95 | mean abs offset ×10³ "
-             "| median slope | level ×10³ | CD-L2 ×10³ record / at 0 / at level | F@0.01 at 0 → at level |",
-             "|---" * 10 + "|"]
+    cells = []
     for r in rows:
         offs = " / ".join(f"{r[f'offset_p{q}'] * 1e3:.3g}" for q in PERCENTILES)
         flags = "".join(f" ({what} at level)" for what in ("empty", "capped") if r[f"{what}_at_level"])
-        lines.append(f"| {r['model']} | {r['shape']} | {r['capacity'] or '–'} | {r['seed']} | {offs} "
-                     f"| {r['offset_mean_abs'] * 1e3:.3g} | {r['median_slope']:.3g} | {r['level'] * 1e3:.3g} "
-                     f"| {r['chamfer_l2_record'] * 1e3:.4g} / {r['chamfer_l2_at_0'] * 1e3:.4g} / "
-                     f"{r['chamfer_l2_at_level'] * 1e3:.4g}{flags} "
-                     f"| {r.get('fscore@0.01_at_0', math.nan):.3g} → {r.get('fscore@0.01_at_level', math.nan):.3g} |")
+        cells.append([f"{r['model']}", f"{r['shape']}", f"{r['capacity'] or '–'}", f"{r['seed']}", offs,
+                      f"{r['offset_mean_abs'] * 1e3:.3g}", f"{r['median_slope']:.3g}", f"{r['level'] * 1e3:.3g}",
+                      f"{r['chamfer_l2_record'] * 1e3:.4g} / {r['chamfer_l2_at_0'] * 1e3:.4g} / "
+                      f"{r['chamfer_l2_at_level'] * 1e3:.4g}{flags}",
+                      f"{r.get('fscore@0.01_at_0', math.nan):.3g} → {r.get('fscore@0.01_at_level', math.nan):.3g}"])
+    lines = pipe_lines(["model", "shape", "capacity", "seed", "offset ×10³ p5 / p25 / p50 / p75 / p95",
+                        "mean abs offset ×10³", "median slope", "level ×10³", "CD-L2 ×10³ record / at 0 / at level",
+                        "F@0.01 at 0 → at level"], cells)
     lines += ["", "offset: the field's value at a point sampled on the GT surface over its gradient's norm there, a "
               "first-order signed distance to the learned zero level (> 0: the learned surface lies inside the true "
               "one). level: the median field value on the GT surface. 'record' is the run's own result; 'at 0' the "
