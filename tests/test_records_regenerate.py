@@ -230,9 +230,10 @@ def test_restored_records_resume_a_sweep_on_another_machine(results, tmp_path, c
     assert compact.main(["--restore", packed, str(other)]) == 0
     said = capsys.readouterr()
     assert "restored 2 records" in said.out and "key '../../escaped' is not a run folder" in said.err
+    assert "schema_version 0, not 1 (a sweep runs it again)" in said.err  # read_compact leaves it out, as reports do
     assert sorted(os.listdir(other / "single")) == sorted(r["key"] for r in ok)  # nothing escaped, no old schema
     assert not (tmp_path / "escaped").exists()
-    assert compact.restore(packed, str(other)) == (0, 2, 3)
+    assert compact.restore(packed, str(other)) == (0, 2, 2)  # the failed record and the escaping key
     restored = {r["key"]: r for r in compact.load_records(str(other / "single"))}
     seed0 = runner.run(compose("shape=cube", "model=mesh", "seed=0", out_dir=other))
     assert seed0["started"] == restored[seed0["key"]]["started"]
@@ -243,6 +244,14 @@ def test_restored_records_resume_a_sweep_on_another_machine(results, tmp_path, c
     assert report_main([str(results), "--out", str(tmp_path / "b"), "--plots", "none"]) == 0
     assert (tmp_path / "a" / "table.md").read_text() == (tmp_path / "b" / "table.md").read_text()
     assert compact.main(["--restore", str(tmp_path / "none.jsonl.gz"), str(other)]) == 2
+
+
+def test_a_report_from_a_compact_file_leaves_out_a_record_of_another_schema_as_from_a_folder(results, tmp_path, capsys):
+    ok = [r for r in compact.load_records(str(results)) if r["status"] == "ok"]
+    unversioned = {k: v for k, v in ok[0].items() if k != "schema_version"}
+    packed = compact.write_compact([unversioned, ok[1]], str(tmp_path / "r.jsonl.gz"))
+    assert [r["key"] for r in compact.load_records(packed, strict=True)] == [ok[1]["key"]]
+    assert "line 1: no schema_version, not 1 (a sweep runs it again)" in capsys.readouterr().err
 
 
 def test_no_committed_report_names_a_folder_of_the_machine_that_ran_it():

@@ -28,7 +28,7 @@ from typing import IO, Any, Iterable
 
 from ddfbench.core.atomic import write_atomic
 from ddfbench.core.errors import InputError, one_line
-from ddfbench.run.runs import SCHEMA_VERSION, find_records, record_path, record_problem, write_json_atomic
+from ddfbench.run.runs import find_records, record_path, record_problem, schema_problem, write_json_atomic
 
 FILE = "records.jsonl.gz"
 KEY = re.compile(r"[0-9a-f]{16}")  # runs.config_key
@@ -76,7 +76,8 @@ def write_compact(records: list[dict[str, Any]], path: str) -> str:
 def read_compact(path: str, strict: bool = False) -> list[dict[str, Any]]:
     """The records of a compact file, each with `_dir` None (its run folder is not here). A line that is not a
     run record is left out with one stderr line naming the file and the line; with strict it is a one-line
-    InputError (a damaged file that a report written from it would replace). A file gzip cannot read is one."""
+    InputError (a damaged file that a report written from it would replace). A file gzip cannot read is one. A
+    record of another schema (or none) is left out with a line, strict or not, as find_records leaves it out."""
     out = []
     try:
         with gzip.open(path, "rt", encoding="utf-8") as fh:
@@ -89,6 +90,7 @@ def read_compact(path: str, strict: bool = False) -> list[dict[str, Any]]:
                 if problem and strict:
                     raise InputError(f"{path} line {number}: {problem}: a damaged compact file (nothing written; "
                                      "git checkout restores a committed one)")
+                problem = problem or schema_problem(rec)  # another schema is no damage: left out, as find_records does
                 if problem:
                     print(f"ddfbench: skipped {path} line {number}: {problem}", file=sys.stderr)
                     continue
@@ -112,8 +114,9 @@ def load_records(source: str, strict: bool = False) -> list[dict[str, Any]]:
 def restore(path: str, out_dir: str) -> tuple[int, int, int]:
     """Write each ok record of the current schema in the compact file at path (what the runner skips) to
     out_dir/<experiment>/<key>/record.json, where that folder holds no record yet (a run of this machine is never
-    replaced); return (written, kept, left out). A failed or older record is left out (its run goes again), as is
-    one whose experiment or key is not a plain folder name, with one stderr line naming it."""
+    replaced); return (written, kept, left out). A failed record is left out (its run goes again), as is one whose
+    experiment or key is not a plain folder name, with one stderr line naming it; one of another schema read_compact
+    leaves out, with its line."""
     from ddfbench.run.checks import SAFE_NAME  # the run folders' rule (checks imports the families: torch)
 
     written = kept = left = 0
@@ -123,7 +126,7 @@ def restore(path: str, out_dir: str) -> tuple[int, int, int]:
             print(f"ddfbench: skipped {path}: experiment {experiment!r}, key {key!r} is not a run folder", file=sys.stderr)
             left += 1
             continue
-        if rec.get("status") != "ok" or rec.get("schema_version") != SCHEMA_VERSION:
+        if rec.get("status") != "ok":
             left += 1
             continue
         target = record_path(out_dir, experiment, key)

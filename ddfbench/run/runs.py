@@ -126,6 +126,14 @@ def read_record(path: str) -> dict[str, Any] | None:
     return load_record(path)[0]
 
 
+def schema_problem(rec: Mapping[str, Any]) -> str | None:
+    """Why a record is not of the current schema (what is_done reads: a sweep runs it again), else None."""
+    if rec.get("schema_version") == SCHEMA_VERSION:
+        return None
+    found = f"schema_version {rec['schema_version']!r}" if "schema_version" in rec else "no schema_version"
+    return f"{found}, not {SCHEMA_VERSION} (a sweep runs it again)"
+
+
 def is_done(path: str) -> bool:
     """True where an ok record of the current schema exists (the run is skipped unless forced)."""
     rec = read_record(path)
@@ -143,9 +151,8 @@ def find_records(root: str) -> list[dict[str, Any]]:
             continue
         path = os.path.join(folder, RECORD_FILE)
         rec, problem = load_record(path)
-        if rec is not None and rec.get("schema_version") != SCHEMA_VERSION:  # what is_done reads: a sweep reruns it
-            found = f"schema_version {rec['schema_version']!r}" if "schema_version" in rec else "no schema_version"
-            problem = f"{found}, not {SCHEMA_VERSION} (a sweep runs it again)"
+        if rec is not None and (other := schema_problem(rec)):
+            problem = other
         elif rec is not None and (first := seen.get((rec["experiment"], rec["key"]))) is not None:
             problem = f"a second record of run {rec['experiment']}/{rec['key']} (the first: {first})"
         if problem:
