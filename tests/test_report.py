@@ -620,3 +620,23 @@ def test_a_row_whose_every_mesh_is_empty_says_not_converged_and_is_not_ranked():
     ddf = next(line for line in md.splitlines() if line.startswith("| ddf |"))
     assert "not converged" not in ddf
     assert "not converged: every run's reconstruction was empty" in md
+
+
+def test_a_report_names_the_scenes_its_image_columns_come_from():
+    from ddfbench.report.__main__ import scene_lines
+
+    def rendered(width, n):
+        rec = make_record()
+        rec["config"]["scene"] = {"name": "normals", "outputs": ["depth", "mask", "normal"], "width": width,
+                                  "height": width, "cameras": {"n": n}, "timing": {"repeats": 3, "warmup": 1}}
+        return rec
+
+    unrendered = make_record()
+    unrendered["config"]["scene"] = {"name": "none", "outputs": []}
+    lines = scene_lines([rendered(64, 2), rendered(64, 2), rendered(128, 1), unrendered])
+    assert lines[1] == "The image columns come from the scenes:"
+    assert "- `normals`: depth, mask, normal at 128×128, 1 camera, against the oracle's render of the exact mesh; warm " \
+           "time the median of up to 3 renders after 1 warm-up (1 run)" in lines
+    assert any(line.startswith("- `normals`: depth, mask, normal at 64×64, 2 cameras") and line.endswith("(2 runs)")
+               for line in lines)
+    assert scene_lines([unrendered]) == []

@@ -122,6 +122,25 @@ def information_lines(records: list[dict[str, Any]]) -> list[str]:
                                                        for source, models in sorted(by_source.items())]
 
 
+def scene_lines(records: list[dict[str, Any]]) -> list[str]:
+    """Markdown lines naming the scenes the image columns (mask IoU, depth MAE, normal error, render times) come from:
+    outputs, size, cameras and the timing of each distinct scene of the records; [] where none rendered."""
+    scenes: dict[str, int] = {}
+    for rec in records:
+        scene = (rec.get("config") or {}).get("scene") or {}
+        if not scene.get("outputs"):
+            continue
+        timing, cameras = scene.get("timing") or {}, (scene.get("cameras") or {}).get("n")
+        text = (f"`{scene.get('name')}`: {', '.join(scene['outputs'])} at {scene.get('width')}×{scene.get('height')}, "
+                f"{cameras} camera{'s' * (cameras != 1)}, against the oracle's render of the exact mesh; warm time the "
+                f"median of up to {timing.get('repeats')} renders after {timing.get('warmup')} warm-up")
+        scenes[text] = scenes.get(text, 0) + 1
+    if not scenes:
+        return []
+    return ["", "The image columns come from the scene" + ("s" if len(scenes) > 1 else "") + ":", ""] + \
+        [f"- {text} ({n} run{'s' * (n > 1)})" for text, n in sorted(scenes.items())]
+
+
 def _write_section(out_dir: str, name: str, title: str, rows: list[dict[str, Any]], markdown: str) -> str:
     """Write <name>.md (the titled markdown table) and <name>.csv (its rows) into out_dir; return the markdown."""
     text = f"## {title}\n\n" + markdown
@@ -202,7 +221,7 @@ def write_report(source: str, out_dir: str, note: str | None = None,
         lines += [f"**Mixed code commits: {', '.join(shas)}: rows may not be comparable.**", ""]
     lines += [f"{len(records)} run records (code: {', '.join(shas) or 'unknown'}), kept in `{compact.FILE}` beside "
               f"this report.", ""]
-    lines += ["", md, "", *information_lines(records)]
+    lines += ["", md, "", *information_lines(records), *scene_lines(records)]
     for part in extra:
         lines += ["", part]
     for p in (p for p in written if p.endswith(".png")):
