@@ -25,43 +25,50 @@ def _read_umask() -> int:
 UMASK = _read_umask()
 
 
+def _publish(tmp: str, path: str, fill: Callable[[], None]) -> str:
+    """Run fill(), which writes tmp whole and syncs it, then rename tmp over path; return path. A failure of either
+    removes tmp and raises."""
+    try:
+        fill()
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+    return path
+
+
 def write_atomic(path: str, write: Callable[[IO[Any]], None], mode: str = "w") -> str:
     """Fill a temporary file in path's folder by write(fh) (mode "w" text, "wb" bytes), fsync it, then rename it
     over path; return path. A failure removes the temporary file and raises. The file is readable like every other
     output (0666 less the umask; mkstemp alone makes it 0600)."""
     fd, tmp = tempfile.mkstemp(prefix=f".{os.path.basename(path)}.", suffix=".tmp", dir=os.path.dirname(path) or ".")
-    try:
+
+    def fill() -> None:
         with os.fdopen(fd, mode) as fh:
             with contextlib.suppress(OSError):  # a filesystem without modes (some network mounts) keeps mkstemp's
                 os.fchmod(fh.fileno(), 0o666 & ~UMASK)
             write(fh)
             fh.flush()
             os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
-    return path
+
+    return _publish(tmp, path, fill)
 
 
 def write_atomic_named(path: str, tmp: str, write: Callable[[str], None]) -> str:
     """Like write_atomic for a writer that takes a file name: write(tmp) fills tmp (the caller names it beside
     path: torch.save stores the name in its archive, so the name keeps the bytes), which is fsynced and renamed
     over path; return path. A failure removes tmp and raises."""
-    try:
+
+    def fill() -> None:
         write(tmp)
         fd = os.open(tmp, os.O_RDONLY)
         try:
             os.fsync(fd)
         finally:
             os.close(fd)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
-    return path
+
+    return _publish(tmp, path, fill)
 
 
 def leftovers(path: str) -> list[str]:
