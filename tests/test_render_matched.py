@@ -13,7 +13,7 @@ def rec(model, family, depth_mae, warm_s, seed=0, trace=None, width=64):
     preset_trace = {"eps": 1e-5, "eps_abs": 1e-6, "omega": 1.0, "max_steps": 256} if "sdf" in family else {}
     model_cfg = {"family": family, **({"trace": {**preset_trace, **(trace or {})}} if preset_trace else {})}
     cfg = {"seed": seed, "model": model_cfg}
-    return {"status": "ok", "model": model, "family": family, "shape": {"name": "bunny"},
+    return {"status": "ok", "schema_version": 1, "model": model, "family": family, "shape": {"name": "bunny"},
             "scene": {"width": width, "height": width}, "config": cfg,
             "overrides": [f"seed={seed}", *(f"++model.trace.{k}={v}" for k, v in (trace or {}).items())],
             "metrics": {"depth_mae": depth_mae}, "cost": {"render_warm_s": warm_s}}
