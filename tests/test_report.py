@@ -640,3 +640,6 @@ def test_a_report_names_the_scenes_its_image_columns_come_from():
     assert any(line.startswith("- `normals`: depth, mask, normal at 64×64, 2 cameras") and line.endswith("(2 runs)")
                for line in lines)
     assert scene_lines([unrendered]) == []
+    placed = rendered(64, 2)
+    placed["config"]["scene"]["cameras"]["positions"] = [[0, 0, 2], [2, 0, 0], [0, 2, 0]]  # the orbit's n is unused
+    assert "at 64×64, 3 cameras," in scene_lines([placed])[3]

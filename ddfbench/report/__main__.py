@@ -130,7 +130,8 @@ def scene_lines(records: list[dict[str, Any]]) -> list[str]:
         scene = (rec.get("config") or {}).get("scene") or {}
         if not scene.get("outputs"):
             continue
-        timing, cameras = scene.get("timing") or {}, (scene.get("cameras") or {}).get("n")
+        timing, orbit = scene.get("timing") or {}, scene.get("cameras") or {}
+        cameras = len(orbit["positions"]) if orbit.get("positions") else orbit.get("n")  # scene.py: positions win
         text = (f"`{scene.get('name')}`: {', '.join(scene['outputs'])} at {scene.get('width')}×{scene.get('height')}, "
                 f"{cameras} camera{'s' * (cameras != 1)}, against the oracle's render of the exact mesh; warm time the "
                 f"median of up to {timing.get('repeats')} renders after {timing.get('warmup')} warm-up")

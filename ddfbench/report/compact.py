@@ -78,7 +78,12 @@ def read_compact(path: str, strict: bool = False) -> list[dict[str, Any]]:
     run record is left out with one stderr line naming the file and the line; with strict it is a one-line
     InputError (a damaged file that a report written from it would replace). A file gzip cannot read is one. A
     record of another schema (or none) is left out with a line, strict or not, as find_records leaves it out."""
-    out = []
+    return _read_compact(path, strict)[0]
+
+
+def _read_compact(path: str, strict: bool) -> tuple[list[dict[str, Any]], int]:
+    """read_compact's records and how many records of another schema (or none) it left out."""
+    out, other_schema = [], 0
     try:
         with gzip.open(path, "rt", encoding="utf-8") as fh:
             for number, line in enumerate(fh, 1):
@@ -90,14 +95,15 @@ def read_compact(path: str, strict: bool = False) -> list[dict[str, Any]]:
                 if problem and strict:
                     raise InputError(f"{path} line {number}: {problem}: a damaged compact file (nothing written; "
                                      "git checkout restores a committed one)")
-                problem = problem or schema_problem(rec)  # another schema is no damage: left out, as find_records does
+                if not problem and (problem := schema_problem(rec)):  # no damage: left out, as find_records does
+                    other_schema += 1
                 if problem:
                     print(f"ddfbench: skipped {path} line {number}: {problem}", file=sys.stderr)
                     continue
                 out.append({**rec, "_dir": None})
     except (OSError, EOFError, UnicodeDecodeError) as exc:  # not gzip, cut short, not UTF-8
         raise InputError(f"{path}: cannot be read as a compact file ({one_line(exc)})") from None
-    return out
+    return out, other_schema
 
 
 def records_of(folder: str) -> list[dict[str, Any]]:
@@ -114,13 +120,14 @@ def load_records(source: str, strict: bool = False) -> list[dict[str, Any]]:
 def restore(path: str, out_dir: str) -> tuple[int, int, int]:
     """Write each ok record of the current schema in the compact file at path (what the runner skips) to
     out_dir/<experiment>/<key>/record.json, where that folder holds no record yet (a run of this machine is never
-    replaced); return (written, kept, left out). A failed record is left out (its run goes again), as is one whose
-    experiment or key is not a plain folder name, with one stderr line naming it; one of another schema read_compact
-    leaves out, with its line."""
+    replaced); return (written, kept, left out). A failed record or one of another schema (read_compact's line names
+    it) is left out (its run goes again), as is one whose experiment or key is not a plain folder name, with one
+    stderr line naming it."""
     from ddfbench.run.checks import SAFE_NAME  # the run folders' rule (checks imports the families: torch)
 
-    written = kept = left = 0
-    for rec in read_compact(path):
+    records, left = _read_compact(path, strict=False)
+    written = kept = 0
+    for rec in records:
         experiment, key = rec["experiment"], rec["key"]
         if not (KEY.fullmatch(key) and SAFE_NAME.fullmatch(experiment) and ".." not in experiment):
             print(f"ddfbench: skipped {path}: experiment {experiment!r}, key {key!r} is not a run folder", file=sys.stderr)
