@@ -47,6 +47,8 @@ def test_a_failed_seed_is_a_seed_that_never_reached_the_floor():
     (row,) = [r for r in convergence.time_to_floor_rows(recs + [diverged, *lost]) if r["model"] == "gan_sdf"]
     assert (row["n"], row["reached_5x"]) == (3, 0) and math.isinf(row["median_s_5x"])
     assert "| gan_sdf | bunny | 3 |" in convergence.to_markdown([row]) and "not reached (0/3)" in convergence.to_markdown([row])
+    alone = convergence.time_to_floor_rows(lost)  # no ok run of the shape: no floor to print
+    assert "| gan_sdf | bunny | 3 | – | not reached (0/3) | not reached (0/3) | – |" in convergence.to_markdown(alone)
 
 
 def test_time_to_floor_with_half_the_seeds_there_is_the_slower_of_those_that_did():

@@ -104,7 +104,8 @@ def to_markdown(rows: list[dict[str, Any]]) -> str:
         for k in ks:
             s = r[f"median_s_{k:g}x"]
             times.append((f"{s:.3g}" if math.isfinite(s) else NOT_REACHED) + f" ({r[f'reached_{k:g}x']}/{r['n']})")
-        cells.append([f"{r['model']}", f"{r['shape']}", f"{r['n']}", f"{r['floor'] * 1e3:.4g}", *times,
+        floor_cell = f"{r['floor'] * 1e3:.4g}" if math.isfinite(r["floor"]) else "–"  # no ok run of the shape
+        cells.append([f"{r['model']}", f"{r['shape']}", f"{r['n']}", floor_cell, *times,
                       f"{r['budget_s']:.0f}" if math.isfinite(r["budget_s"]) else "–"])
     lines = pipe_lines(header, cells)
     lines += ["", "Seconds of training (probes excluded) at the first probe whose chamfer L2 is at most k × the "
