@@ -100,6 +100,7 @@ class SweepTableCallback(Callback):
                 logging.getLogger(launcher_log).setLevel(logging.WARNING)
 
     def on_multirun_end(self, config: DictConfig, **kwargs: Any) -> None:
+        from ddfbench.report.records import distinct_shape_names
         from ddfbench.report.tables import console_table, summarize
         from ddfbench.run.progress import sweep_total
         from ddfbench.run.runs import RECORD_FILE, read_record
@@ -116,7 +117,7 @@ class SweepTableCallback(Callback):
                     records.append(rec)
         if records and not config.get("quiet", False):
             folder = os.path.join(out_dir, str(records[0]["experiment"]))
-            print(console_table(summarize(records)) + f"records: {folder}\n"
+            print(console_table(summarize(distinct_shape_names(records))) + f"records: {folder}\n"
                   f"full table, plots and gallery: python -m ddfbench.report {folder}   (writes {folder}/report)")
         failed = [r for r in records if r.get("status") != "ok"]
         total = max(sweep_total(sweep_dir) or 0, len(records))

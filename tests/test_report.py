@@ -643,3 +643,26 @@ def test_a_report_names_the_scenes_its_image_columns_come_from():
     placed = rendered(64, 2)
     placed["config"]["scene"]["cameras"]["positions"] = [[0, 0, 2], [2, 0, 0], [0, 2, 0]]  # the orbit's n is unused
     assert "at 64×64, 3 cameras," in scene_lines([placed])[3]
+
+
+def test_files_of_one_name_get_distinct_shape_names_and_their_own_noise_floor_rows():
+    """ShapeNet keeps every mesh as models/model_normalized.obj: named by the file name alone, two geometries shared
+    a noise-floor row (their mean) and the best marks of one shape."""
+    def on_file(path, chamfer, floor):
+        rec = make_record(model="mesh", shape="model_normalized", chamfer=chamfer)
+        rec["config"]["shape"] = {"name": "file", "path": path}
+        rec["metrics"]["noise_floor"] = {"chamfer_l2": floor}
+        return rec
+
+    a = on_file("/d/02691156/aa/models/model_normalized.obj", 1e-3, 1e-4)
+    b = on_file("/d/02691156/bb/models/model_normalized.obj", 2e-3, 3e-4)
+    torus = make_record(model="mesh", shape="torus")
+    near = make_record(model="mesh", shape="torus")
+    near["config"]["shape"] = {"name": "file", "path": "torus.obj"}  # a bare file name beside the catalog torus
+    named = records.distinct_shape_names([a, b, torus, near])
+    assert [records.shape_name(r) for r in named] == ["aa/models/model_normalized", "bb/models/model_normalized",
+                                                      "torus", "torus (file)"]
+    assert named[2] is torus and records.shape_name(a) == "model_normalized"  # the records themselves unchanged
+    floors = tables.noise_floor_rows(tables.summarize(named)).set_index("shape")["chamfer_l2_mean"]
+    assert floors["aa/models/model_normalized"] == pytest.approx(1e-4)
+    assert floors["bb/models/model_normalized"] == pytest.approx(3e-4)

@@ -46,6 +46,7 @@ from ddfbench.report import compact, convergence, finalists, shape_suite
 from ddfbench.report.gallery import CAPTION, GALLERY, write_gallery
 from ddfbench.report.paired import paired_report
 from ddfbench.report.plots import PLOTS, plots_for, write_plots
+from ddfbench.report.records import distinct_shape_names
 from ddfbench.report.tables import per_run, summarize, to_csv, to_latex, to_markdown
 from ddfbench.run.runs import code_commits
 
@@ -159,7 +160,8 @@ def write_report(source: str, out_dir: str, note: str | None = None,
     depends on the records and options alone, so the report regenerates byte for byte from its compact file.
     draw=False draws no image and links the ones out_dir already holds (a check of the text files).
     Raises MixedCommits when the records come from several code commits (unless allowed)."""
-    records = compact.load_records(source, strict=True)
+    raw = compact.load_records(source, strict=True)
+    records = distinct_shape_names(raw)  # the tables' names; the compact file keeps the records as they are
     if not records:
         inside = os.path.join(source, compact.FILE)
         hint = f" (a compact file is read by its path: {inside})" if os.path.isfile(inside) else ""
@@ -174,7 +176,7 @@ def write_report(source: str, out_dir: str, note: str | None = None,
     df = summarize(finalists.selection_records(records) if kind == "tune_finalists" else records)
     os.makedirs(out_dir, exist_ok=True)
     if os.path.abspath(source) != os.path.abspath(os.path.join(out_dir, compact.FILE)):
-        compact.write_compact(records, os.path.join(out_dir, compact.FILE))
+        compact.write_compact(raw, os.path.join(out_dir, compact.FILE))
     with open(os.path.join(out_dir, OPTIONS_FILE), "w") as fh:
         json.dump({"note": note, "plots": list(kinds) if kinds is not None else None,
                    "allow_mixed_commits": allow_mixed_commits}, fh, indent=1)

@@ -11,12 +11,13 @@ finished, the shape, a number, and the chamfer L2 (through ddfbench.evaluate.met
 from __future__ import annotations
 
 import math
+import os
 from typing import Any, Iterable
 
 from ddfbench.evaluate.metric_registry import FSCORE_RADII, as_float, by_name
 
-__all__ = ["OFF_SHAPE_RULE", "Record", "WIDEST_F", "as_float", "at_largest_image", "chamfer_l2", "empty_mesh",
-           "no_result", "off_shape", "ok_records", "shape_name"]
+__all__ = ["OFF_SHAPE_RULE", "Record", "WIDEST_F", "as_float", "at_largest_image", "chamfer_l2",
+           "distinct_shape_names", "empty_mesh", "no_result", "off_shape", "ok_records", "shape_name"]
 
 WIDEST_F = f"fscore@{max(FSCORE_RADII)}"  # 0 there: no sampled point of either surface near the other
 OFF_SHAPE_RULE = f"{by_name()[WIDEST_F].label} = 0"  # as the reports write it
@@ -33,6 +34,38 @@ def ok_records(records: Iterable[Record]) -> list[Record]:
 def shape_name(rec: Record) -> str:
     """The record's shape name ("None" where it has none)."""
     return str((rec.get("shape") or {}).get("name"))
+
+
+def _file_of(rec: Record) -> str | None:
+    """The mesh file a record's shape was read from (`shape=file shape.path=...`), None for a catalog shape."""
+    shape = (rec.get("config") or {}).get("shape") or {}
+    return str(shape.get("path")) if shape.get("name") == "file" and shape.get("path") else None
+
+
+def distinct_shape_names(records: list[Record]) -> list[Record]:
+    """The records with one geometry to each shape name. A file's shape is named by its file name without the
+    extension, so files of one name in several folders (ShapeNet's model_normalized.obj) or a file named like a
+    catalog shape (torus.obj beside `torus`) would share a name, and with it a noise-floor row, "best" marks and a
+    mean over shapes. Each such file is named instead by the shortest ending of its path that tells them apart
+    (`a/model`, `myshapes/torus`); catalog shapes keep their names. A renamed record is a new dict."""
+    sources: dict[str, set[str | None]] = {}
+    for rec in records:
+        sources.setdefault(shape_name(rec), set()).add(_file_of(rec))
+    label: dict[str, str] = {}
+    for name, found in sources.items():
+        files = sorted(f for f in found if f is not None)
+        if len(found) < 2 or not files:
+            continue
+        parts = {f: os.path.splitext(os.path.normpath(f))[0].split(os.sep) for f in files}
+        for depth in range(2, max(len(p) for p in parts.values()) + 1):
+            ends = {f: "/".join(p[-depth:]) for f, p in parts.items()}
+            if len(set(ends.values())) == len(files) and not set(ends.values()) & set(sources):
+                break
+        else:  # a bare file name beside a catalog shape of that name
+            ends = {f: f"{'/'.join(p)} (file)" for f, p in parts.items()}
+        label.update(ends)
+    return [{**rec, "shape": {**rec["shape"], "name": label[_file_of(rec)]}} if _file_of(rec) in label else rec
+            for rec in records]
 
 
 def chamfer_l2(rec: Record) -> float:
