@@ -46,7 +46,7 @@ from ddfbench.report import compact, convergence, finalists, shape_suite
 from ddfbench.report.gallery import CAPTION, GALLERY, write_gallery
 from ddfbench.report.paired import paired_report
 from ddfbench.report.plots import PLOTS, plots_for, write_plots
-from ddfbench.report.records import distinct_shape_names
+from ddfbench.report.records import distinct_shape_names, family_class
 from ddfbench.report.tables import per_run, summarize, to_csv, to_latex, to_markdown
 from ddfbench.run.runs import code_commits
 
@@ -107,15 +107,12 @@ SOURCE_OF_KIND = {
 def information_lines(records: list[dict[str, Any]]) -> list[str]:
     """Markdown lines saying what each model in the records was built or trained from (its family's
     sample_kind), so that a row built from the exact mesh is not read as a learned result."""
-    from ddfbench.models import load_family
-
     by_source: dict[str, set[str]] = {}
     for rec in records:
-        family = str(rec.get("family"))
-        try:
-            kind = load_family(family).sample_kind
-        except InputError:  # a family this checkout does not have
+        family = family_class(str(rec.get("family")))
+        if family is None:  # a family this checkout does not have
             continue
+        kind = family.sample_kind
         by_source.setdefault(SOURCE_OF_KIND.get(kind, str(kind)), set()).add(str(rec.get("model")))
     if not by_source:
         return []

@@ -72,20 +72,24 @@ def share_mean(per_shape: Mapping[str, float], level: float = LEVEL) -> OverShap
     return OverShapes(s.mean, s.lo, s.hi, s.n)
 
 
+def _log_ratios(a: Mapping[str, float], b: Mapping[str, float]) -> np.ndarray:
+    """ln(a / b) over the shapes both have, where both are > 0."""
+    return np.asarray([math.log(a[s] / b[s]) for s in a if s in b and a[s] > 0 and b[s] > 0])
+
+
 def ratio(a: Mapping[str, float], b: Mapping[str, float], level: float = LEVEL) -> OverShapes:
     """Geometric mean over the shared shapes of a / b (both > 0), its interval and the t test's two-sided p."""
-    logs = np.asarray([math.log(a[s] / b[s]) for s in a if s in b and a[s] > 0 and b[s] > 0])
+    logs = _log_ratios(a, b)
     if len(logs) >= 2 and np.ptp(logs) < 1e-12:  # the same ratio on every shape: no spread, no doubt
         center = float(np.exp(logs.mean()))
-        return OverShapes(center, center, center, len(logs), 0.0 if abs(logs.mean()) > 1e-12 else 1.0)
-    p = float(_scipy_stats.ttest_1samp(logs, 0.0).pvalue) if len(logs) >= 2 else math.nan
-    return _exp(logs, level, p)
+        return OverShapes(center, center, center, len(logs), ratio_p(a, b))
+    return _exp(logs, level, ratio_p(a, b))
 
 
 def ratio_p(a: Mapping[str, float], b: Mapping[str, float], against: float = 1.0) -> float:
     """Two-sided p of the t test of the mean log of a / b over the shared shapes (both > 0) against log(against):
     the test of "the ratio is `against`", e.g. an equivalence bound (NaN below n = 2; 0 or 1 with no spread)."""
-    logs = np.asarray([math.log(a[s] / b[s]) for s in a if s in b and a[s] > 0 and b[s] > 0])
+    logs = _log_ratios(a, b)
     if len(logs) < 2:
         return math.nan
     if np.ptp(logs) < 1e-12:

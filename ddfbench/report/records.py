@@ -10,6 +10,7 @@ finished, the shape, a number, and the chamfer L2 (through ddfbench.evaluate.met
 
 from __future__ import annotations
 
+import functools
 import math
 import os
 from typing import Any, Iterable
@@ -17,7 +18,7 @@ from typing import Any, Iterable
 from ddfbench.evaluate.metric_registry import FSCORE_RADII, as_float, by_name
 
 __all__ = ["OFF_SHAPE_RULE", "Record", "WIDEST_F", "as_float", "at_largest_image", "chamfer_l2",
-           "distinct_shape_names", "empty_mesh", "no_result", "off_shape", "ok_records", "shape_name"]
+           "distinct_shape_names", "empty_mesh", "family_class", "no_result", "off_shape", "ok_records", "shape_name"]
 
 WIDEST_F = f"fscore@{max(FSCORE_RADII)}"  # 0 there: no sampled point of either surface near the other
 OFF_SHAPE_RULE = f"{by_name()[WIDEST_F].label} = 0"  # as the reports write it
@@ -34,6 +35,14 @@ def ok_records(records: Iterable[Record]) -> list[Record]:
 def shape_name(rec: Record) -> str:
     """The record's shape name ("None" where it has none)."""
     return str((rec.get("shape") or {}).get("name"))
+
+
+@functools.cache
+def family_class(family: str) -> Any:
+    """The Representation class of a record's `family` in this checkout, None where it has no such family."""
+    from ddfbench.models import available_families, load_family  # the families import torch: only when asked
+
+    return load_family(family) if family in available_families() else None
 
 
 def _file_of(rec: Record) -> str | None:

@@ -15,7 +15,6 @@ against an independent resample of GT) is its own row per shape. The fit budget 
 
 from __future__ import annotations
 
-import functools
 import json
 import math
 from typing import Any, Iterable
@@ -24,7 +23,7 @@ import numpy as np
 import pandas as pd
 
 from ddfbench.evaluate import metric_registry
-from ddfbench.report.records import NOT_CONVERGED, OFF_SHAPE_RULE, empty_mesh, off_shape
+from ddfbench.report.records import NOT_CONVERGED, OFF_SHAPE_RULE, empty_mesh, family_class, off_shape
 from ddfbench.report.stats import INTERVAL_NAME, best_and_ties, summarize_values, within_range
 from ddfbench.run.runs import NON_SEMANTIC_KEYS
 
@@ -64,18 +63,11 @@ def override_labels(overrides: Iterable[str]) -> dict[str, str]:
     return out
 
 
-@functools.cache
-def _built(family: str) -> bool:
-    """Whether `family` is one of this checkout's families that build from the mesh and train nothing."""
-    from ddfbench.models import available_families, load_family
-
-    return family in available_families() and not load_family(family).learned
-
-
 def budget_label(rec: dict[str, Any]) -> str:
     """How the fit was bounded: "steps" | "epochs" | "wall-clock" (record fit.budget; "–" if none), or "built" for a
     family that trains nothing (its record holds the configured kind, which bound nothing)."""
-    return "built" if _built(str(rec.get("family"))) else str((rec.get("fit") or {}).get("budget") or "–")
+    family = family_class(str(rec.get("family")))
+    return "built" if family is not None and not family.learned else str((rec.get("fit") or {}).get("budget") or "–")
 
 
 def record_row(rec: dict[str, Any]) -> dict[str, Any]:
