@@ -148,3 +148,13 @@ def test_geometry_metrics_equal_brute_force_on_its_own_samples():
     cos_rg = np.abs((rn * gn[sq.argmin(0)]).sum(1))
     assert 0.5 < m["normal_consistency"] < 1 and np.isclose(m["normal_consistency"], 0.5 * (cos_gr.mean() + cos_rg.mean()))
     assert np.isclose(m["noise_floor"]["chamfer_l2"], brute_sq(g, floor).mean() + brute_sq(floor, g).mean())
+
+
+def test_empty_reconstruction_scores_the_radii_a_run_measures():
+    """An empty reconstruction's F-score penalties sit at the run's radii only, as a non-empty run's F-scores
+    do: a registry radius the config did not ask for would give a table column a 0 no run measured."""
+    sphere = trimesh.creation.icosphere(3, 0.5)
+    empty = trimesh.Trimesh(np.zeros((0, 3)), np.zeros((0, 3), int))
+    full = metrics.geometry_metrics(sphere, sphere, 1000, [0.05], seed=0, with_point_to_surface=False)
+    none = metrics.geometry_metrics(sphere, empty, 1000, [0.05], seed=0, with_point_to_surface=False)
+    assert set(none["fscore"]) == set(full["fscore"]) == {"0.05"} and none["fscore"]["0.05"] == 0.0

@@ -134,9 +134,10 @@ def distance_metrics(d_gr: np.ndarray, d_rg: np.ndarray, radii: Sequence[float])
 
 def penalty_metrics(radii: Sequence[float]) -> dict[str, Any]:
     """Metrics of an empty or failed reconstruction: every penalty the metric registry declares
-    (the worst values the domain allows), an F-score penalty per radius, flagged."""
+    (the worst values the domain allows), an F-score penalty at each of `radii` (the radii a non-empty
+    run of the same config measures: none at a registry radius the run did not ask for), flagged."""
     out = penalties()
-    out.setdefault("fscore", {}).update({str(r): fscore(float(r)).penalty for r in radii})
+    out["fscore"] = {str(r): fscore(float(r)).penalty for r in radii}
     out["empty_reconstruction"] = True
     return out
 
