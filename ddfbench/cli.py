@@ -79,10 +79,13 @@ class SweepTableCallback(Callback):
 
     def on_multirun_start(self, config: DictConfig, **kwargs: Any) -> None:
         from ddfbench.core.errors import InputError
+        from ddfbench.evaluate.metric_registry import check_objective
         from ddfbench.run.progress import count_jobs, start_sweep
 
         try:
             check_sweep_levels(config)
+            if config.get("objective") and config.hydra.sweeper.get("direction") is not None:
+                check_objective(str(config.objective), str(config.hydra.sweeper.direction))
         except InputError as err:
             print(f"ddfbench: {err}", file=sys.stderr)
             sys.exit(1)

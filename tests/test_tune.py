@@ -10,7 +10,7 @@ import pytest
 
 from ddfbench.core import plugins
 from ddfbench.core.errors import InputError
-from ddfbench.evaluate.metric_registry import by_name, objective_value
+from ddfbench.evaluate.metric_registry import by_name, check_objective, objective_value
 from ddfbench.fit import tune
 from ddfbench.run.runs import find_records
 
@@ -76,9 +76,33 @@ def test_the_objective_is_the_metric_or_its_penalty():
     assert objective_value(ok, "chamfer_l2") == 2.5e-5
     assert objective_value({"status": "failed", "metrics": {}}, "chamfer_l2") == chamfer.penalty
     assert objective_value({"status": "ok", "metrics": {"chamfer_l2": math.nan}}, "chamfer_l2") == chamfer.penalty
-    assert objective_value({"status": "ok", "metrics": {}}, "mask_iou") == math.inf  # no penalty declared
+    assert objective_value({"status": "ok", "metrics": {}}, "mask_iou") == -math.inf  # no penalty: its worst end
     with pytest.raises(InputError, match="objective=chamfr: not a metric"):
         objective_value(ok, "chamfr")
+
+
+def test_an_objective_whose_better_end_the_study_runs_from_is_refused():
+    check_objective("chamfer_l2", "minimize")
+    check_objective("fscore@0.01", "maximize")
+    with pytest.raises(InputError, match=r"objective=fscore@0.01: higher is better, and the study would minimize"):
+        check_objective("fscore@0.01", "minimize")  # a failed trial's F of 0 would be the study's best
+    with pytest.raises(InputError, match=r"objective=chamfer_l2: lower is better, and the study would maximize"):
+        check_objective("chamfer_l2", "maximize")
+    with pytest.raises(InputError, match="objective=steps: a setting or count"):
+        check_objective("steps", "minimize")
+    with pytest.raises(InputError, match="objective=steps: a setting or count"):
+        objective_value({"status": "ok", "fit": {"steps": 3}}, "steps")
+
+
+def test_the_tune_sweep_refuses_a_wrong_way_objective_before_any_job(tmp_path):
+    done = subprocess.run([sys.executable, "-m", "ddfbench", "+experiment=tune", "model=neural_sdf",
+                           "objective=fscore@0.01", f"out_dir={tmp_path}", f"hydra.sweep.dir={tmp_path}/sweep"],
+                          capture_output=True, text=True, timeout=300)
+    assert done.returncode == 1
+    assert done.stderr.strip().splitlines() == [
+        "ddfbench: objective=fscore@0.01: higher is better, and the study would minimize it "
+        "(hydra.sweeper.direction=minimize)"]
+    assert not (tmp_path / "tune").exists()
 
 
 def test_without_the_extra_the_tune_experiment_is_one_line(monkeypatch):

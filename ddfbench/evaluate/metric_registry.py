@@ -129,18 +129,43 @@ def by_name() -> dict[str, Metric]:
     return {m.name: m for m in METRICS}
 
 
-def objective_value(record: Mapping[str, Any], name: str) -> float:
-    """Metric `name` of a record as an optimizer's objective: its empty-reconstruction penalty where the
-    run failed or holds no finite value (inf for a metric without one). Unknown names are an InputError."""
+def _objective(name: str) -> Metric:
+    """The registry's metric `name` as an objective: an InputError for an unknown name or a setting or count."""
     from ddfbench.core.errors import InputError
 
     metric = by_name().get(name)
     if metric is None:
         raise InputError(f"objective={name}: not a metric (known: {', '.join(m.name for m in METRICS)})")
+    if not metric.better:
+        raise InputError(f"objective={name}: a setting or count, with no better end to optimize toward")
+    return metric
+
+
+def check_objective(name: str, direction: str) -> None:
+    """An InputError where a study that optimizes in `direction` ("minimize" | "maximize") would run away from
+    the better end of metric `name` (e.g. minimizing an F-score), or where `name` is no objective."""
+    from ddfbench.core.errors import InputError
+
+    metric = _objective(name)
+    wanted = {"minimize": "low", "maximize": "high"}.get(direction)
+    if wanted is None:
+        raise InputError(f"hydra.sweeper.direction={direction}: minimize or maximize")
+    if metric.better != wanted:
+        raise InputError(f"objective={name}: {metric.better}er is better, and the study would {direction} it "
+                         f"(hydra.sweeper.direction={direction})")
+
+
+def objective_value(record: Mapping[str, Any], name: str) -> float:
+    """Metric `name` of a record as an optimizer's objective: its empty-reconstruction penalty where the
+    run failed or holds no finite value (without one, its worst end: inf where lower is better, -inf where higher).
+    A name that is no metric, or a setting or count, is an InputError."""
+    metric = _objective(name)
     value = metric.read(record) if record.get("status") == "ok" else float("nan")
     if np.isfinite(value):
         return value
-    return float("inf") if metric.penalty is None else float(metric.penalty)
+    if metric.penalty is not None:
+        return float(metric.penalty)
+    return float("inf") if metric.better == "low" else float("-inf")
 
 
 def penalties() -> dict[str, Any]:
