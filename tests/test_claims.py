@@ -294,7 +294,7 @@ def matched_times(device="cuda"):
 
 
 def test_matched_depth_error_row_follows_the_loosened_tracer():
-    claim = "DDF renders faster at matched depth error"
+    claim = "DDF renders faster at matched accuracy"
     assert verdicts(records(render_time=matched_times(), render_matched=render_matched(0.05)))[claim] == claims.REFUTED
     assert verdicts(records(render_time=matched_times(), render_matched=render_matched(0.2)))[claim] == claims.CONFIRMED
     assert verdicts(records(render_time=matched_times("cpu"), render_matched=render_matched(0.2, "cpu")))[claim] == \
@@ -302,7 +302,7 @@ def test_matched_depth_error_row_follows_the_loosened_tracer():
 
 
 def test_the_matched_render_claim_reads_the_device_of_its_own_records():
-    claim = "DDF renders faster at matched depth error"
+    claim = "DDF renders faster at matched accuracy"
     cuda = records(render_time=matched_times(), render_matched=render_matched(0.2),
                    render_shapes=render_shapes((0.2, 0.3, 0.25, 0.4)))  # CPU frames over shapes beside them
     assert verdicts(cuda)[claim] == claims.CONFIRMED

@@ -1,4 +1,4 @@
-"""Render speed at matched depth error (ddfbench.report.matched) on synthetic records, and the experiment grid."""
+"""Render speed at matched accuracy (ddfbench.report.matched) on synthetic records, and the experiment grid."""
 
 import math
 
@@ -7,7 +7,7 @@ import pytest
 from ddfbench.report import matched
 
 
-def rec(model, family, depth_mae, warm_s, seed=0, trace=None, width=64):
+def rec(model, family, depth_mae, warm_s, seed=0, trace=None, width=64, mask_iou=None):
     """A render record; an SDF preset carries its whole tracer in its config (as grid_sdf's does), a swept setting
     is its `++model.trace.*` overrides."""
     preset_trace = {"eps": 1e-5, "eps_abs": 1e-6, "omega": 1.0, "max_steps": 256} if "sdf" in family else {}
@@ -16,7 +16,7 @@ def rec(model, family, depth_mae, warm_s, seed=0, trace=None, width=64):
     return {"status": "ok", "schema_version": 1, "model": model, "family": family, "shape": {"name": "bunny"},
             "scene": {"width": width, "height": width}, "config": cfg,
             "overrides": [f"seed={seed}", *(f"++model.trace.{k}={v}" for k, v in (trace or {}).items())],
-            "metrics": {"depth_mae": depth_mae}, "cost": {"render_warm_s": warm_s}}
+            "metrics": {"depth_mae": depth_mae, "mask_iou": mask_iou}, "cost": {"render_warm_s": warm_s}}
 
 
 def records(sdf_loose_error):
@@ -49,6 +49,16 @@ def test_matched_setting_is_the_fastest_at_most_as_inaccurate_as_the_ddf():
 def test_a_looser_tracer_that_reaches_the_ddf_error_becomes_the_match():
     sdf = by_family(matched.matched_table(records(sdf_loose_error=1.9e-3)))["neural_sdf"]
     assert sdf["matched_setting"].startswith('neural_sdf {"eps_abs": 0.01') and sdf["matched_speedup"] == pytest.approx(0.5)
+
+
+def test_a_setting_that_loses_the_silhouette_is_no_match():
+    def with_iou(r):  # the loose tracer meets the DDF's depth error on the pixels both hit, but misses the edges
+        loose = "omega" in "".join(r["overrides"])
+        return {**r, "metrics": {**r["metrics"], "mask_iou": 0.80 if loose else 0.95 if r["family"] == "ddf" else 0.99}}
+
+    sdf = by_family(matched.matched_table([with_iou(r) for r in records(sdf_loose_error=1.9e-3)]))["neural_sdf"]
+    assert sdf["matched_setting"] == 'neural_sdf {"eps_abs": 0.001}' and sdf["matched_mask_iou"] == pytest.approx(0.99)
+    assert sdf["reference_mask_iou"] == pytest.approx(0.95)
 
 
 def test_no_setting_as_accurate_is_not_reached():

@@ -1,4 +1,4 @@
-"""Render speed at matched depth error: each family's fastest setting that is at least as accurate as the DDF.
+"""Render speed at matched accuracy: each family's fastest setting that is at least as accurate as the DDF.
 
 `python -m ddfbench.report.matched RENDER_TIME RENDER_MATCHED [--out DIR]` (folders of run records or the reports'
 compact records, e.g. reports/render_time/records.jsonl.gz reports/render_matched/records.jsonl.gz): the table on
@@ -7,8 +7,9 @@ stdout, and with --out also DIR/matched.md and DIR/matched.csv.
 A family's settings are its rows: sphere-tracer settings (model.trace: eps, eps_abs, omega) for the SDF
 families, the mesh LODs for the mesh family. Per shape and image size, against every reference (the
 `ddf_tuned` model) row, a family's matched setting is its fastest (lowest mean warm render time) whose mean
-depth error is at most the reference's; the default setting (no tracer override, full mesh) stands beside
-it. Speed-up = the setting's warm render time / the reference's (> 1: the DDF renders faster).
+depth error is at most the reference's and whose mean mask IoU is at least the reference's (depth error is taken on
+pixels both renders hit, so a tracer that loses the silhouette would look accurate by it alone); the default
+setting (no tracer override, full mesh) stands beside it. Speed-up = the setting's warm render time / the reference's (> 1: the DDF renders faster).
 Means over seeds with n; depth error in normalized units (×10³ in the table), warm time in seconds.
 """
 
@@ -30,7 +31,7 @@ from ddfbench.report.stats import sig3, summarize_values
 from ddfbench.report.tables import override_labels, pipe_lines
 
 REFERENCE = "ddf_tuned"  # the DDF that render_time runs (its tuned preset); tests check it is a member
-ERROR, SPEED = ("metrics", "depth_mae"), ("cost", "render_warm_s")
+ERROR, MASK, SPEED = ("metrics", "depth_mae"), ("metrics", "mask_iou"), ("cost", "render_warm_s")
 NOT_REACHED = "not reached"
 
 
@@ -72,7 +73,7 @@ def settings_table(records: Iterable[dict[str, Any]]) -> pd.DataFrame:
         row = {"family": family, "setting": setting, "model": model, "shape": shape, "size": size,
                # the untouched tracer of the preset that was run; of the mesh, the full mesh (LODs are settings)
                "default": setting == model and (family != "mesh" or model == "mesh")}
-        for name, path in (("depth_mae", ERROR), ("render_warm_s", SPEED)):
+        for name, path in (("depth_mae", ERROR), ("mask_iou", MASK), ("render_warm_s", SPEED)):
             s = summarize_values(_measure(r, path) for r in recs)
             row.update({f"{name}_mean": s.mean, f"{name}_std": s.std, f"{name}_ci_lo": s.lo,
                         f"{name}_ci_hi": s.hi, f"{name}_n": s.n})
@@ -83,8 +84,9 @@ def settings_table(records: Iterable[dict[str, Any]]) -> pd.DataFrame:
 def matched_table(records: Iterable[dict[str, Any]], reference: str = REFERENCE) -> pd.DataFrame:
     """Per (shape, size, reference row, other family): the default and the matched setting with speed-ups.
 
-    matched = the family's fastest setting with mean depth error <= the reference's ("not reached" when
-    none is that accurate; the family's most accurate setting is then shown)."""
+    matched = the family's fastest setting with mean depth error <= the reference's and mean mask IoU >= the
+    reference's (where the reference has one; "not reached" when none is that accurate: the family's setting of
+    least depth error is then shown)."""
     table = settings_table(records)
     out = []
     if table.empty:
@@ -93,16 +95,20 @@ def matched_table(records: Iterable[dict[str, Any]], reference: str = REFERENCE)
         for _, ref in part[part["model"] == reference].iterrows():
             others = part[part["family"] != ref["family"]]
             for family, fam in others.groupby("family", sort=False):
-                ok = fam[fam["depth_mae_mean"] <= ref["depth_mae_mean"]]
+                as_whole = fam["mask_iou_mean"] >= ref["mask_iou_mean"] if ref["mask_iou_mean"] == ref["mask_iou_mean"] \
+                    else True  # a reference without a mask IoU: depth error alone
+                ok = fam[(fam["depth_mae_mean"] <= ref["depth_mae_mean"]) & as_whole]
                 pick = ok.nsmallest(1, "render_warm_s_mean") if len(ok) else fam.nsmallest(1, "depth_mae_mean")
                 default = fam[fam["default"]].nsmallest(1, "depth_mae_mean")
                 entry = {"shape": shape, "size": size, "reference": ref["setting"],
-                         "reference_depth_mae": ref["depth_mae_mean"], "reference_warm_s": ref["render_warm_s_mean"],
+                         "reference_depth_mae": ref["depth_mae_mean"], "reference_mask_iou": ref["mask_iou_mean"],
+                         "reference_warm_s": ref["render_warm_s_mean"],
                          "reference_n": ref["render_warm_s_n"], "family": family}
                 for tag, row in (("default", default), ("matched", pick)):
                     r = row.iloc[0] if len(row) else None
                     entry[f"{tag}_setting"] = None if r is None else r["setting"]
                     entry[f"{tag}_depth_mae"] = math.nan if r is None else r["depth_mae_mean"]
+                    entry[f"{tag}_mask_iou"] = math.nan if r is None else r["mask_iou_mean"]
                     entry[f"{tag}_warm_s"] = math.nan if r is None else r["render_warm_s_mean"]
                     entry[f"{tag}_n"] = 0 if r is None else r["render_warm_s_n"]
                     entry[f"{tag}_speedup"] = (math.nan if r is None else r["render_warm_s_mean"] / ref["render_warm_s_mean"])
@@ -113,20 +119,23 @@ def matched_table(records: Iterable[dict[str, Any]], reference: str = REFERENCE)
 
 def to_markdown(df: pd.DataFrame) -> str:
     """The matched table as markdown, one line per (shape, size, reference, family)."""
-    header = ["shape", "size", "DDF depth err ×10³", "DDF warm s", "family", "default setting",
-              "depth err ×10³", "warm s", "× DDF time", "matched setting", "depth err ×10³", "warm s", "× DDF time"]
+    header = ["shape", "size", "DDF depth err ×10³", "DDF mask IoU", "DDF warm s", "family", "default setting",
+              "depth err ×10³", "mask IoU", "warm s", "× DDF time", "matched setting", "depth err ×10³", "mask IoU",
+              "warm s", "× DDF time"]
     rows = []
     for _, r in df.iterrows():
         matched = r["matched_setting"] if r["matched_reached"] else f"{NOT_REACHED} (most accurate: {r['matched_setting']})"
         rows.append([
-            str(r["shape"]), str(r["size"]), sig3(r["reference_depth_mae"], 1e3), sig3(r["reference_warm_s"]),
-            str(r["family"]), str(r["default_setting"]), sig3(r["default_depth_mae"], 1e3), sig3(r["default_warm_s"]),
-            sig3(r["default_speedup"]), matched, sig3(r["matched_depth_mae"], 1e3), sig3(r["matched_warm_s"]),
-            sig3(r["matched_speedup"])])
+            str(r["shape"]), str(r["size"]), sig3(r["reference_depth_mae"], 1e3), sig3(r["reference_mask_iou"]),
+            sig3(r["reference_warm_s"]), str(r["family"]), str(r["default_setting"]),
+            sig3(r["default_depth_mae"], 1e3), sig3(r["default_mask_iou"]), sig3(r["default_warm_s"]),
+            sig3(r["default_speedup"]), matched, sig3(r["matched_depth_mae"], 1e3), sig3(r["matched_mask_iou"]),
+            sig3(r["matched_warm_s"]), sig3(r["matched_speedup"])])
     lines = pipe_lines(header, rows)
     lines += ["", "Means over seeds (n in table.csv). × DDF time: the family's warm render time over the DDF's "
               "(> 1: the DDF is faster). Matched: the family's fastest setting whose mean depth error is at most "
-              "the DDF's; 'not reached': no setting is that accurate."]
+              "the DDF's and whose mean mask IoU is at least the DDF's; 'not reached': no setting is that "
+              "accurate (the setting of least depth error is shown)."]
     return "\n".join(lines) + "\n"
 
 

@@ -17,7 +17,7 @@ Regenerates the committed reports: for each experiment (default: tune, ablation,
 storage, render_time, render_shapes, render_matched, pareto, convergence, paper_ddf) runs `python -m ddfbench +experiment=<e> out_dir=<results> [OVERRIDE ...]`
 (tune: once per model that declares a search space, report by ddfbench.report.tune)
 (finished runs are skipped, so an interrupted regeneration resumes), then writes
-`python -m ddfbench.report <results>/<e> --out <reports>/<e>` (render_matched's comparison at matched depth error with
+`python -m ddfbench.report <results>/<e> --out <reports>/<e>` (render_matched's comparison at matched accuracy with
 render_time's DDF is a row of claims.md, ddfbench.report.matched). With overrides the report's first line
 says "reduced budget: <overrides>" (or --note), so a report of a scaled run says how it was scaled.
 The wall time of each sweep is printed and written to <reports>/<e>/wall_time.txt. Last, the paper
