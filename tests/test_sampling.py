@@ -317,3 +317,16 @@ def test_a_label_subset_keeps_every_label_of_the_rows_it_draws():
     assert np.array_equal(sub.hit, rows % 2 == 0) and np.array_equal(sub.line_hit, rows % 3 != 1)
     assert np.array_equal(sub.sdf, rows - 25.0) and sub.meta == {"strategy": "test"}
     assert Samples(x=full.x, sdf=full.sdf).subset(5, np.random.default_rng(1)).line_hit is None
+
+
+def test_a_dataset_key_names_a_caster_other_than_open3d_and_keeps_open3ds_committed_keys():
+    from ddfbench.report import compact
+    from ddfbench.sampling.cache import dataset_key
+
+    rec = compact.load_records("reports/sampling/records.jsonl.gz", strict=True)[0]  # an open3d run's dataset
+    assert rec["config"]["oracle"]["backend"] == "open3d"
+    shape = load_shape(rec["config"]["shape"])
+    keys = {backend: dataset_key(shape, Oracle(shape.mesh, backend), rec["config"]["sampling"],
+                                 rec["sampling"]["kind"], rec["config"]["seed"]) for backend in ("open3d", "embree")}
+    assert rec["artifacts"]["dataset"].endswith(f"-{keys['open3d']}.npz")  # the key its record names
+    assert keys["embree"] != keys["open3d"]  # a warp or embree draw is not served to an open3d run

@@ -18,10 +18,14 @@ CACHE_VERSION = 2  # 2: ray samples carry line_hit; bump when a sampler's output
 
 def dataset_key(shape: Shape, oracle: Oracle, cfg: Mapping[str, Any], kind: str, seed: int) -> str:
     """16 hex digits of sha256 over the shape (name, transform, vertex and face bytes), the sampling
-    config, kind, seed, the oracle's inside-test votes and CACHE_VERSION."""
+    config, kind, seed, the oracle's inside-test votes, its ray caster where that is not open3d (backends differ in a
+    few rejections at edges, so each has its own draw; open3d's keys are those from before the field) and
+    CACHE_VERSION."""
     h = hashlib.sha256()
     head = {"shape": shape.name, "transform": shape.transform, "sampling": dict(cfg), "kind": kind, "seed": int(seed),
             "occupancy_rays": oracle.occupancy_rays, "version": CACHE_VERSION}
+    if oracle.backend != "open3d":
+        head["backend"] = oracle.backend
     h.update(json.dumps(head, sort_keys=True, default=str).encode())
     h.update(np.ascontiguousarray(shape.mesh.vertices, np.float64).tobytes())
     h.update(np.ascontiguousarray(shape.mesh.faces, np.int64).tobytes())
