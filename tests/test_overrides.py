@@ -21,6 +21,14 @@ def test_a_config_option_that_has_no_file_is_one_line_with_the_near_names(arg, l
     assert str(err.value).startswith(line) and "\n" not in str(err.value)
 
 
+@pytest.mark.parametrize("value", ["/data/chair.obj", "chair.obj", "scans/chair.PLY"])
+def test_a_mesh_file_given_as_the_shape_says_how_to_read_a_file(value):
+    with pytest.raises(InputError) as err:
+        check_overrides([f"shape={value}"], sweeps=True)
+    assert str(err.value).startswith(f"shape={value}: no shape named {value!r} (a mesh file is read with shape=file "
+                                     f"shape.path={value}; shape options: ")
+
+
 def test_a_list_of_values_needs_a_sweep():
     with pytest.raises(InputError, match=r"^model=mesh,mesh_lod500: a list of values is a sweep: add -m"):
         check_overrides(["model=mesh,mesh_lod500"], sweeps=False)

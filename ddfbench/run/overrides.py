@@ -58,7 +58,17 @@ def check_choice(arg: str, group: str, value: object) -> None:
         return
     near = difflib.get_close_matches(value, options, n=3, cutoff=0.6)
     hint = f"did you mean {', '.join(near)}? " if near else ""
+    if group == "shape" and looks_like_a_file(value):
+        hint = f"a mesh file is read with shape=file shape.path={value}; "
     raise InputError(f"{arg}: no {group} named {value!r} ({hint}{group} options: {', '.join(options)})")
+
+
+def looks_like_a_file(value: str) -> bool:
+    """Whether a value given where a catalog name goes (`shape=/data/chair.obj`) reads as a file: a folder in it or
+    a mesh file's extension."""
+    from ddfbench.truth.shapes import _MESH_EXTENSIONS
+
+    return "/" in value or os.sep in value or value.rsplit(".", 1)[-1].lower() in _MESH_EXTENSIONS
 
 
 def other_configs(args: list[str]) -> bool:
@@ -90,3 +100,4 @@ def check_overrides(args: list[str], sweeps: bool) -> None:
         for value in values:
             if not (isinstance(value, str) and "$" in value):  # an interpolation: resolved when the job composes
                 check_choice(arg, key, value)
+
