@@ -23,7 +23,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from ddfbench.core import plugins
 from ddfbench.core.plugins import CONF_DIR  # plugins registers the `members` resolver the experiments use
-from ddfbench.run.overrides import MULTIRUN_FLAGS, check_overrides, values_of
+from ddfbench.run.overrides import MULTIRUN_FLAGS, check_overrides, check_shape_path, values_of
 
 INTERRUPTED = ("interrupted; run the same command again to go on (finished runs are skipped, a fit resumes from its "
                "last checkpoint)")
@@ -428,6 +428,7 @@ def main() -> None:
         check_out_dir(sys.argv[1:])
         check_plain_keys(sys.argv[1:])
         check_overrides(sys.argv[1:], sweeps=sweeps(sys.argv[1:]))
+        check_shape_path(sys.argv[1:])
         check_tune(sys.argv[1:])
         sys.argv[1:] = checked_overrides(sys.argv[1:])
     except InputError as err:

@@ -5,7 +5,7 @@ import pytest
 
 from ddfbench import cli
 from ddfbench.core.errors import InputError
-from ddfbench.run.overrides import check_overrides, values_of
+from ddfbench.run.overrides import check_overrides, check_shape_path, values_of
 
 
 @pytest.mark.parametrize("arg,line", [
@@ -27,6 +27,18 @@ def test_a_mesh_file_given_as_the_shape_says_how_to_read_a_file(value):
         check_overrides([f"shape={value}"], sweeps=True)
     assert str(err.value).startswith(f"shape={value}: no shape named {value!r} (a mesh file is read with shape=file "
                                      f"shape.path={value}; shape options: ")
+
+
+def test_a_shape_path_without_shape_file_stops_instead_of_running_the_catalog_shape():
+    for args in (["shape.path=/data/chair.obj"], ["model=grid_sdf", "+shape.path=/data/chair.obj"],
+                 ["+experiment=ablation", "shape.path=/data/chair.obj"]):
+        with pytest.raises(InputError, match=r"^shape.path=/data/chair.obj: a path is read only with shape=file .*"
+                                             r"add shape=file$"):
+            check_shape_path(args)
+    for args in (["shape=file", "shape.path=/data/chair.obj"], ["-m", "shape=cube,file", "shape.path=/data/c.obj"],
+                 ["shape.name=file", "shape.path=/data/chair.obj"], ["model=mesh"],
+                 ["-cd", "/data/myconf", "shape.path=/data/chair.obj"]):
+        check_shape_path(args)
 
 
 def test_a_list_of_values_needs_a_sweep():

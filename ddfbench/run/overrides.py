@@ -101,3 +101,11 @@ def check_overrides(args: list[str], sweeps: bool) -> None:
             if not (isinstance(value, str) and "$" in value):  # an interpolation: resolved when the job composes
                 check_choice(arg, key, value)
 
+
+def check_shape_path(args: list[str]) -> None:
+    """A `shape.path` on a command line that chooses no shape (no `shape=`, no `shape.name=`): the run's shapes are
+    then catalog shapes (the bunny, or an experiment's), which ignore it, so the file would silently not be read."""
+    paths = values_of(args, "shape.path")
+    if paths and not values_of(args, "shape") and not values_of(args, "shape.name") and not other_configs(args):
+        raise InputError(f"shape.path={paths[-1]}: a path is read only with shape=file (without it the run's shapes "
+                         f"are catalog shapes, which ignore it): add shape=file")
