@@ -66,9 +66,9 @@ def check_choice(arg: str, group: str, value: object) -> None:
 def looks_like_a_file(value: str) -> bool:
     """Whether a value given where a catalog name goes (`shape=/data/chair.obj`) reads as a file: a folder in it or
     a mesh file's extension."""
-    from ddfbench.truth.shapes import _MESH_EXTENSIONS
+    from ddfbench.truth.shapes import MESH_EXTENSIONS
 
-    return "/" in value or os.sep in value or value.rsplit(".", 1)[-1].lower() in _MESH_EXTENSIONS
+    return "/" in value or os.sep in value or value.rsplit(".", 1)[-1].lower() in MESH_EXTENSIONS
 
 
 def other_configs(args: list[str]) -> bool:

@@ -18,7 +18,7 @@ import trimesh
 from ddfbench.core.errors import InputError
 from ddfbench.truth.catalog import ALIASES, BUILDERS, PYMESHLAB_SAMPLES, pymeshlab_samples_dir
 
-_MESH_EXTENSIONS = {"obj", "ply", "stl", "off", "glb", "gltf", "dae", "3mf"}
+MESH_EXTENSIONS = {"obj", "ply", "stl", "off", "glb", "gltf", "dae", "3mf"}
 
 
 @dataclass
@@ -69,9 +69,9 @@ def read_mesh_file(path: str) -> trimesh.Trimesh:
     if os.path.getsize(path) == 0:
         raise InputError(f"shape file {path}: is empty (0 bytes)")
     ext = path.rsplit(".", 1)[-1].lower() if "." in os.path.basename(path) else ""
-    if ext not in _MESH_EXTENSIONS:
+    if ext not in MESH_EXTENSIONS:
         raise InputError(
-            f"shape file {path}: unsupported format '.{ext}' (supported: {', '.join(sorted(_MESH_EXTENSIONS))})"
+            f"shape file {path}: unsupported format '.{ext}' (supported: {', '.join(sorted(MESH_EXTENSIONS))})"
         )
     try:
         loaded = trimesh.load(path, force="mesh", process=False)
