@@ -69,3 +69,26 @@ def test_a_sweep_whose_jobs_left_no_record_exits_1_and_says_how_many(tmp_path, c
         SweepTableCallback().on_multirun_end(config)
     assert stop.value.code == 1
     assert capsys.readouterr().err == "ddfbench: 2 of 3 jobs failed (2 left no record)\n"
+
+
+def test_the_plain_help_opens_with_what_ddfbench_runs_and_where_to_read_more():
+    import subprocess
+    import sys
+
+    done = subprocess.run([sys.executable, "-m", "ddfbench", "--help"], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0
+    head = done.stdout.split("== Configuration groups ==")[0]
+    assert head.startswith("python -m ddfbench: one run") and "powered by Hydra" not in head
+    assert "`+experiment=NAME --help`" in head and "README.md" in head
+
+
+def test_the_suite_help_names_its_tiers_and_the_overrides_after_a_double_dash(capsys):
+    import pytest
+
+    from ddfbench.report.suite import load_suite, main
+
+    with pytest.raises(SystemExit):
+        main(["run", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    assert f"(v1: {', '.join(load_suite('v1'))})" in text  # the tiers the suite file has
+    assert "run nothing" in text and "after `--`" in text

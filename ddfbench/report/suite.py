@@ -476,19 +476,22 @@ def command(args: argparse.Namespace, overrides: list[str]) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m ddfbench.suite", description=__doc__.split("\n")[0])
+    parser = argparse.ArgumentParser(prog="python -m ddfbench.suite", description=" ".join(__doc__.split("\n")[:2]))
     sub = parser.add_subparsers(dest="command", required=True)
-    run_p = sub.add_parser("run", help="run a tier (or print its plan with --dry-run)")
-    run_p.add_argument("suite")
-    run_p.add_argument("--tier", required=True)
-    run_p.add_argument("--dry-run", action="store_true")
+    run_p = sub.add_parser("run", help="run a tier (or print its plan with --dry-run)",
+                           epilog="Hydra overrides after `--` go to every experiment's command line, e.g. "
+                                  "`-- threads=1 hydra/launcher=local_parallel`.")
+    run_p.add_argument("suite", help="the suite file conf/suite/<SUITE>.yaml (e.g. v1)")
+    run_p.add_argument("--tier", required=True, help="a tier of the suite file (v1: core, long, gpu)")
+    run_p.add_argument("--dry-run", action="store_true",
+                       help="print the jobs per model and the estimated CPU-hours per experiment; run nothing")
     run_p.add_argument("--results", default="results", help="out_dir of the runs (default: results)")
     run_p.add_argument("--only", help="comma-separated experiments of the tier to run or plan (default: all)")
     run_p.add_argument("--from-reports", action="store_true",
                        help="first restore each report's committed records into --results: finished runs are "
                             "skipped and the report is written from all of them (resume a tier across machines)")
     status_p = sub.add_parser("status", help="which reports are stale")
-    status_p.add_argument("suite")
+    status_p.add_argument("suite", help="the suite file conf/suite/<SUITE>.yaml (e.g. v1)")
     argv = sys.argv[1:] if argv is None else argv
     overrides = argv[argv.index("--") + 1:] if "--" in argv else []  # Hydra overrides for every experiment's command
     args = parser.parse_args(argv[:argv.index("--")] if "--" in argv else argv)
