@@ -253,13 +253,19 @@ def check_levels_keep(cfg: dict[str, Any], choices: dict[str, str], overrides: l
 def check_plain_keys(args: list[str]) -> None:
     """A one-line InputError, with the near-miss names, for a `key=` or `train|eval|oracle|scene.key=` override
     without `+` that nothing declares (`train.max_step=5`, `scene.widht=3`), which Hydra would refuse in several
-    lines; the `+` form is checked per job (ddfbench.run.checks.check_known_keys, render.scene)."""
+    lines, and for a `+train|eval|oracle.key=` that nothing reads (`+train.max_step=5`: every job would refuse it,
+    ddfbench.run.checks.check_known_keys); the other `+` forms are checked per job (check_known_keys,
+    render.scene)."""
     from ddfbench.core.errors import InputError
     from ddfbench.run.checks import CHECKED_SECTIONS, declared_keys
 
     known = declared_keys()
     for arg in args:
         path, eq, value = arg.partition("=")
+        section, _, key = path.lstrip("+").partition(".")
+        if arg.startswith("+") and eq and key and section in CHECKED_SECTIONS:
+            plugins.strict_keys(section, {key.split(".")[0]: value}, dict.fromkeys(known[section]), near=True)
+            continue
         if not eq or arg.startswith(("+", "~", "-")) or "/" in path or path.startswith("hydra."):
             continue
         section, _, key = path.partition(".")

@@ -85,6 +85,8 @@ def test_a_key_nothing_reads_is_a_failed_record_naming_it(tmp_path, section, key
 
 
 @pytest.mark.parametrize("arg,named", [("train.max_step=5", "train.max_step: unknown key (did you mean max_steps"),
+                                       ("+train.max_step=5", "train.max_step: unknown key (did you mean max_steps"),
+                                       ("++eval.n_pointz=3", "eval.n_pointz: unknown key (did you mean n_points?"),
                                        ("sed=3", "sed: unknown key (did you mean seed"),
                                        ("eval.n_pointz=3", "eval.n_pointz: unknown key (did you mean n_points?"),
                                        ("oracle.backnd=embree", "oracle.backnd: unknown key (did you mean backend?"),
@@ -93,7 +95,7 @@ def test_a_key_nothing_reads_is_a_failed_record_naming_it(tmp_path, section, key
                                                                "outside the defaults: use +experiment=ablation"),
                                        ("form=quick", "form=quick: form is a config group outside the defaults: "
                                                       "use +form=quick")])
-def test_the_same_key_without_plus_is_one_line_before_hydra_composes(arg, named):
+def test_an_undeclared_key_is_one_line_before_hydra_composes(arg, named):
     with pytest.raises(InputError) as err:
         cli.check_plain_keys(["model=mesh", arg])
     assert str(err.value).startswith(named) and "\n" not in str(err.value)
@@ -103,7 +105,7 @@ def test_plain_overrides_of_declared_keys_groups_and_hydra_pass_the_key_check():
     cli.check_plain_keys(["--multirun", "model=mesh,grid_sdf", "shape=cube", "seed=0,1", "capacity=null", "threads=1",
                           "train.max_steps=5", "eval.n_points=10", "oracle.backend=embree", "scene.width=8",
                           "scene.cameras.n=3", "scene.lights=[]",
-                          "model.lr=1e-3", "+train.max_step=5", "hydra/launcher=ray", "hydra.launcher.n_jobs=2",
+                          "model.lr=1e-3", "++train.max_steps=5", "hydra/launcher=ray", "hydra.launcher.n_jobs=2",
                           "~tracking", "experiment_name=x"])
 
 
