@@ -455,3 +455,26 @@ def test_a_preset_whose_every_bunny_run_failed_keeps_its_row_in_the_verdict():
     rows = {(r[0], r[1].split(":")[0]): r for r in verdict.rows(short, [])}
     assert rows[("ddf_tuned", "short")][1] == "short: no run finished"
     assert rows[("ddf_tuned", "short")][2] == f"failed ({len(ddf_bunny)} of {len(ddf_bunny)} runs)"
+
+
+def test_a_cut_short_records_file_is_one_line_and_leaves_the_generated_files_as_they_were(tmp_path, capsys):
+    """regenerate --from-records over reports one of whose records.jsonl.gz is cut short (a crashed copy, a bad
+    checkout): one line naming it, exit 2, and index.md, verdict.md and the README, which read it, keep every byte
+    (index.md was emptied, then a traceback)."""
+    reports = tmp_path / "reports"
+    shutil.copytree(os.path.join(ROOT, "reports", "default"), reports / "default")
+    for name in ("index.md", "verdict.md"):
+        shutil.copy2(os.path.join(ROOT, "reports", name), reports / name)
+    readme = tmp_path / "README.md"
+    shutil.copy2(os.path.join(ROOT, "README.md"), readme)
+    records = reports / "default" / compact.FILE
+    records.write_bytes(records.read_bytes()[:3000])
+    before = {p: p.read_bytes() for p in (reports / "index.md", reports / "verdict.md", readme)}
+    capsys.readouterr()
+    assert regenerate_main(["--from-records", "--reports", str(reports), "--readme", str(readme)]) == 2
+    err = capsys.readouterr().err
+    assert "Traceback" not in err and f"{records}: cannot be read as a compact file" in err
+    assert {p: p.read_bytes() for p in before} == before
+    assert regenerate_main(["--from-records", "--reports", str(reports), "--readme", str(readme), "--check"]) == 2
+    assert "Traceback" not in capsys.readouterr().err
+

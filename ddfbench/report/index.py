@@ -134,7 +134,9 @@ def render_index(reports: str, suite: str = "v1") -> str:
 
 
 def write_index(reports: str, path: str, suite: str = "v1") -> str:
-    """Write the index of `reports` to path; return path."""
+    """Write the index of `reports` to path; return path. A report whose records cannot be read raises InputError
+    before the file is opened: the index there stays as it was."""
+    text = render_index(reports, suite)
     with open(path, "w", encoding="utf-8") as fh:
-        fh.write(render_index(reports, suite))
+        fh.write(text)
     return path

@@ -162,14 +162,18 @@ def from_records(reports: str, check: bool, readme: str | None = None) -> int:
                  index.FILE: lambda path: index.write_index(reports, path)}
     for name, write in generated.items():
         path = os.path.join(reports, name)
-        if not check:
-            write(path)
-            print(f"rebuilt {path}", flush=True)
-        elif os.path.isfile(path):  # a reports folder without one (a scratch folder) has none to check
-            with tempfile.TemporaryDirectory() as scratch:
-                write(os.path.join(scratch, name))
-                if not filecmp.cmp(path, os.path.join(scratch, name), shallow=False):
-                    differing.append(path)
+        try:  # a damaged records file (named above) leaves the file as it was: one line, exit 2
+            if not check:
+                write(path)
+                print(f"rebuilt {path}", flush=True)
+            elif os.path.isfile(path):  # a reports folder without one (a scratch folder) has none to check
+                with tempfile.TemporaryDirectory() as scratch:
+                    write(os.path.join(scratch, name))
+                    if not filecmp.cmp(path, os.path.join(scratch, name), shallow=False):
+                        differing.append(path)
+        except InputError as exc:
+            unreadable += 1
+            print(f"ddfbench.report.regenerate: {path} not rebuilt: {exc}", file=sys.stderr, flush=True)
     for path in differing:
         print(f"ddfbench.report.regenerate: {path} differs from its rebuild from its records", file=sys.stderr)
     if check:

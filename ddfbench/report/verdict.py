@@ -216,7 +216,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--readme", default="README.md")
     parser.add_argument("--check", action="store_true", help="exit 1 when a committed file differs from the records")
     args = parser.parse_args(argv)
-    block = table(args.reports)
+    try:  # a damaged records file (read_compact names it): one line, nothing written
+        block = table(args.reports)
+    except InputError as exc:
+        print(f"ddfbench.report.verdict: {exc}", file=sys.stderr)
+        return 2
     verdict_path = os.path.join(args.reports, "verdict.md")
     text = "# Verdict\n\n" + block
     try:
