@@ -478,3 +478,17 @@ def test_a_cut_short_records_file_is_one_line_and_leaves_the_generated_files_as_
     assert regenerate_main(["--from-records", "--reports", str(reports), "--readme", str(readme), "--check"]) == 2
     assert "Traceback" not in capsys.readouterr().err
 
+
+
+def test_restoring_a_cut_short_or_garbled_compact_file_is_one_line(results, tmp_path, capsys):
+    """compact --restore of a file gzip cannot read: one line naming it, exit 2, nothing written (was a traceback)."""
+    packed = compact.write_compact(compact.load_records(str(results)), str(tmp_path / "r.jsonl.gz"))
+    cut = tmp_path / "cut.jsonl.gz"
+    cut.write_bytes(open(packed, "rb").read()[:200])
+    garbled = tmp_path / "garbled.jsonl.gz"
+    garbled.write_bytes(b"\x15\xab" * 500)
+    for path in (cut, garbled):
+        assert compact.main(["--restore", str(path), str(tmp_path / "out")]) == 2
+        err = capsys.readouterr().err
+        assert err.startswith(f"ddfbench.report.compact: {path}: cannot be read as a compact file (") and err.count("\n") == 1
+    assert not (tmp_path / "out").exists()

@@ -157,7 +157,11 @@ def main(argv: list[str] | None = None) -> int:
         if not os.path.isfile(args.records):
             print(f"ddfbench.report.compact: {args.records}: no such compact file", file=sys.stderr)
             return 2
-        written, kept, left = restore(args.records, args.out)
+        try:
+            written, kept, left = restore(args.records, args.out)
+        except InputError as exc:  # not gzip, cut short: nothing of it written
+            print(f"ddfbench.report.compact: {exc}", file=sys.stderr)
+            return 2
         print(f"restored {written} records into {args.out} ({kept} already there, kept; {left} failed, older or "
               "misnamed, left out: their runs go again)")
         return 0
