@@ -2,6 +2,7 @@
 written from the run folders, and `regenerate --from-records --check` names a committed file that differs."""
 
 import gzip
+import json
 import os
 import shutil
 import statistics
@@ -233,7 +234,7 @@ def test_restored_records_resume_a_sweep_on_another_machine(results, tmp_path, c
     assert "schema_version 0, not 1 (a sweep runs it again)" in said.err  # read_compact leaves it out, as reports do
     assert sorted(os.listdir(other / "single")) == sorted(r["key"] for r in ok)  # nothing escaped, no old schema
     assert not (tmp_path / "escaped").exists()
-    assert "3 failed, older or misnamed, left out" in said.out  # the failed record, the old schema, the escaping key
+    assert "3 failed, older, misnamed or damaged, left out" in said.out  # the failed record, the old schema, the escaping key
     assert compact.restore(packed, str(other)) == (0, 2, 3)  # counted, as the message says
     restored = {r["key"]: r for r in compact.load_records(str(other / "single"))}
     seed0 = runner.run(compose("shape=cube", "model=mesh", "seed=0", out_dir=other))
@@ -492,3 +493,15 @@ def test_restoring_a_cut_short_or_garbled_compact_file_is_one_line(results, tmp_
         err = capsys.readouterr().err
         assert err.startswith(f"ddfbench.report.compact: {path}: cannot be read as a compact file (") and err.count("\n") == 1
     assert not (tmp_path / "out").exists()
+
+
+def test_restore_counts_a_damaged_line_among_those_left_out(results, tmp_path, capsys):
+    """A line of the compact file that is not a record is named and counted in the summary (it said 0 left out)."""
+    lines = [json.dumps(compact.portable(r)) for r in compact.load_records(str(results)) if r["status"] == "ok"]
+    path = tmp_path / "r.jsonl.gz"
+    with gzip.open(path, "wt") as fh:
+        fh.write("\n".join([lines[0][:-50], *lines[1:]]) + "\n")
+    assert compact.main(["--restore", str(path), str(tmp_path / "out")]) == 0
+    said = capsys.readouterr()
+    assert "line 1: not JSON" in said.err
+    assert f"restored {len(lines) - 1} records" in said.out and "1 failed, older, misnamed or damaged" in said.out

@@ -82,8 +82,8 @@ def read_compact(path: str, strict: bool = False) -> list[dict[str, Any]]:
 
 
 def _read_compact(path: str, strict: bool) -> tuple[list[dict[str, Any]], int]:
-    """read_compact's records and how many records of another schema (or none) it left out."""
-    out, other_schema = [], 0
+    """read_compact's records and how many lines it left out (not a record, or of another schema or none)."""
+    out, left = [], 0
     try:
         with gzip.open(path, "rt", encoding="utf-8") as fh:
             for number, line in enumerate(fh, 1):
@@ -95,15 +95,16 @@ def _read_compact(path: str, strict: bool) -> tuple[list[dict[str, Any]], int]:
                 if problem and strict:
                     raise InputError(f"{path} line {number}: {problem}: a damaged compact file (nothing written; "
                                      "git checkout restores a committed one)")
-                if not problem and (problem := schema_problem(rec)):  # no damage: left out, as find_records does
-                    other_schema += 1
+                if not problem:  # no damage; another schema is left out, as find_records does
+                    problem = schema_problem(rec)
                 if problem:
+                    left += 1
                     print(f"ddfbench: skipped {path} line {number}: {problem}", file=sys.stderr)
                     continue
                 out.append({**rec, "_dir": None})
     except (OSError, EOFError, UnicodeDecodeError) as exc:  # not gzip, cut short, not UTF-8
         raise InputError(f"{path}: cannot be read as a compact file ({one_line(exc)})") from None
-    return out, other_schema
+    return out, left
 
 
 def records_of(folder: str) -> list[dict[str, Any]]:
@@ -162,8 +163,8 @@ def main(argv: list[str] | None = None) -> int:
         except InputError as exc:  # not gzip, cut short: nothing of it written
             print(f"ddfbench.report.compact: {exc}", file=sys.stderr)
             return 2
-        print(f"restored {written} records into {args.out} ({kept} already there, kept; {left} failed, older or "
-              "misnamed, left out: their runs go again)")
+        print(f"restored {written} records into {args.out} ({kept} already there, kept; {left} failed, older, "
+              "misnamed or damaged, left out: their runs go again)")
         return 0
     records = find_records(args.records)
     if not records:
