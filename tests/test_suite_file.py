@@ -88,6 +88,31 @@ def test_a_bad_suite_or_tier_is_one_line_naming_it(tmp_path, monkeypatch):
         suite.load_neutral("v2")  # `status` reads it first: one line too, not a FileNotFoundError
 
 
+@pytest.mark.parametrize("text, says", [
+    ("tiers:\n  core:\n    default: {report: r, overides: [seed=0]}\n",  # misspelt: it ran without its seeds
+     r"tiers.core.default: unknown key overides \(known: report, overrides\)"),
+    ("tiers:\n  core:\n    default: {report: r, overrides: 'seed=0,1'}\n",  # a string: one override a character
+     r"tiers.core.default.overrides: needs a list of overrides \(strings\), not 'seed=0,1'"),
+    ("tiers:\n  core:\n    - default\n", r"tiers.core: needs \{experiment: \{report: ...\}\}, not a list"),
+    ("tiers:\n  core:\n    default: {report: r\n", r"not a readable YAML file \(expected ',' or '\}'.* at line 4\)"),
+    ("- tiers\n", r"needs a mapping of version, tiers, result_neutral, not a list"),
+    ("teirs: {}\n", r"unknown key teirs \(known: version, tiers, result_neutral\)"),
+])
+def test_a_suite_file_with_a_typo_is_one_line_naming_the_key(tmp_path, monkeypatch, capsys, text, says):
+    """A misspelt key, a wrong type or broken YAML in a suite file: one line naming the file and key, exit 2 (a
+    misspelt `overrides` was ignored, a string split into characters, the rest tracebacks)."""
+    (tmp_path / "suite").mkdir()
+    (tmp_path / "experiment").mkdir()
+    (tmp_path / "experiment" / "default.yaml").write_text("")
+    (tmp_path / "suite" / "bad.yaml").write_text(text)
+    monkeypatch.setattr(suite, "CONF_DIR", str(tmp_path))
+    with pytest.raises(InputError, match=r"^conf/suite/bad.yaml: " + says):
+        suite.load_suite("bad")
+    assert suite.main(["run", "bad", "--tier", "core", "--dry-run"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("ddfbench.suite: conf/suite/bad.yaml: ") and err.count("\n") == 1
+
+
 def sha(rev):
     return subprocess.run(["git", "-C", ROOT, "rev-parse", rev], capture_output=True, text=True, check=True).stdout.strip()
 

@@ -32,7 +32,7 @@ from typing import Any
 from omegaconf import OmegaConf
 
 from ddfbench.core import plugins
-from ddfbench.core.errors import InputError
+from ddfbench.core.errors import InputError, first_line
 from ddfbench.core.plugins import CONF_DIR
 from ddfbench.report import compact, finalists
 from ddfbench.report.status import compose_job, sweep_jobs
@@ -53,29 +53,59 @@ class Entry:
     overrides: list[str] = field(default_factory=list)
 
 
+SUITE_KEYS = ("version", "tiers", "result_neutral")  # a suite file's keys
+ENTRY_KEYS = ("report", "overrides")  # an experiment's keys in a tier
+
+
 def _suite_file(name: str) -> dict[str, Any]:
-    """conf/suite/<name>.yaml as a plain dict; a one-line InputError naming the suites there is none."""
+    """conf/suite/<name>.yaml as a plain dict; a one-line InputError naming the suites there is none, or naming the
+    file when it is not YAML, not a mapping or holds a key a suite file does not have."""
     path = os.path.join(CONF_DIR, "suite", f"{name}.yaml")
     if not os.path.isfile(path):
         known = sorted(f[:-5] for f in os.listdir(os.path.join(CONF_DIR, "suite")) if f.endswith(".yaml"))
         raise InputError(f"suite '{name}': no conf/suite/{name}.yaml (suites: {', '.join(known)})")
-    return OmegaConf.to_container(OmegaConf.load(path)) or {}  # type: ignore[return-value]
+    try:
+        found = OmegaConf.to_container(OmegaConf.load(path))
+    except Exception as exc:  # yaml's parse errors, OmegaConf's, an unreadable file
+        mark = getattr(exc, "problem_mark", None)
+        what = f"{getattr(exc, 'problem', None) or first_line(exc)}{f' at line {mark.line + 1}' if mark else ''}"
+        raise InputError(f"conf/suite/{name}.yaml: not a readable YAML file ({what})") from None
+    if found is None:
+        return {}
+    if not isinstance(found, dict):
+        raise InputError(f"conf/suite/{name}.yaml: needs a mapping of {', '.join(SUITE_KEYS)}, not a "
+                         f"{type(found).__name__}")
+    if unknown := [str(k) for k in found if k not in SUITE_KEYS]:
+        raise InputError(f"conf/suite/{name}.yaml: unknown key {', '.join(unknown)} (known: {', '.join(SUITE_KEYS)})")
+    return found
 
 
 def load_suite(name: str) -> dict[str, list[Entry]]:
-    """{tier: entries} of conf/suite/<name>.yaml; a one-line InputError naming the file and key when malformed."""
+    """{tier: entries} of conf/suite/<name>.yaml; a one-line InputError naming the file and key when malformed (a
+    tier that is not a mapping, an experiment's key other than report and overrides, overrides that are not a list
+    of strings: a misspelt `overrides` would run the experiment without them)."""
+    where = f"conf/suite/{name}.yaml"
     tiers = _suite_file(name).get("tiers")
     if not isinstance(tiers, dict) or not tiers:
-        raise InputError(f"conf/suite/{name}.yaml: needs `tiers: {{tier: {{experiment: {{report: ...}}}}}}`")
+        raise InputError(f"{where}: needs `tiers: {{tier: {{experiment: {{report: ...}}}}}}`")
     out: dict[str, list[Entry]] = {}
     for tier, entries in tiers.items():
         out[tier] = []
+        if not isinstance(entries, dict | None):
+            raise InputError(f"{where}: tiers.{tier}: needs {{experiment: {{report: ...}}}}, not a {type(entries).__name__}")
         for experiment, spec in (entries or {}).items():
             if not os.path.isfile(os.path.join(CONF_DIR, "experiment", f"{experiment}.yaml")):
-                raise InputError(f"conf/suite/{name}.yaml: tiers.{tier}.{experiment}: no conf/experiment/{experiment}.yaml")
+                raise InputError(f"{where}: tiers.{tier}.{experiment}: no conf/experiment/{experiment}.yaml")
             if not isinstance(spec, dict) or not spec.get("report"):
-                raise InputError(f"conf/suite/{name}.yaml: tiers.{tier}.{experiment}: needs a `report` folder")
-            out[tier].append(Entry(experiment, str(spec["report"]), [str(o) for o in spec.get("overrides") or []]))
+                raise InputError(f"{where}: tiers.{tier}.{experiment}: needs a `report` folder")
+            if unknown := [str(k) for k in spec if k not in ENTRY_KEYS]:
+                raise InputError(f"{where}: tiers.{tier}.{experiment}: unknown key {', '.join(unknown)} (known: "
+                                 f"{', '.join(ENTRY_KEYS)})")
+            overrides = spec.get("overrides") or []
+            if not isinstance(overrides, list) or not all(isinstance(o, str) for o in overrides):
+                raise InputError(f"{where}: tiers.{tier}.{experiment}.overrides: needs a list of overrides (strings), "
+                                 f"not {overrides!r}")
+            out[tier].append(Entry(experiment, str(spec["report"]), list(overrides)))
     return out
 
 
