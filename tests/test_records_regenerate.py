@@ -1,6 +1,7 @@
 """Records travel with the reports: the compact file round-trips, a report rebuilt from it alone equals the one
 written from the run folders, and `regenerate --from-records --check` names a committed file that differs."""
 
+import errno
 import gzip
 import json
 import os
@@ -505,3 +506,25 @@ def test_restore_counts_a_damaged_line_among_those_left_out(results, tmp_path, c
     said = capsys.readouterr()
     assert "line 1: not JSON" in said.err
     assert f"restored {len(lines) - 1} records" in said.out and "1 failed, older, misnamed or damaged" in said.out
+
+
+def test_compact_into_a_folder_that_cannot_be_written_is_one_line(results, tmp_path, capsys, monkeypatch):
+    """compact and compact --restore where the target cannot be written (read-only, full, missing): one line naming
+    it, exit 2 (was a traceback); a full disk midway keeps the records restored before it."""
+    packed = compact.write_compact(compact.load_records(str(results)), str(tmp_path / "r.jsonl.gz"))
+    assert compact.main([str(results), str(tmp_path / "none" / "r.jsonl.gz")]) == 2
+    err = capsys.readouterr().err
+    assert err == f"ddfbench.report.compact: {tmp_path / 'none' / 'r.jsonl.gz'}: cannot be written (No such file or directory): nothing written\n"
+    real, calls = compact.write_json_atomic, []
+
+    def second_fails(path, data):
+        calls.append(path)
+        if len(calls) == 2:
+            raise OSError(errno.ENOSPC, "No space left on device", path)
+        real(path, data)
+
+    monkeypatch.setattr(compact, "write_json_atomic", second_fails)
+    assert compact.main(["--restore", packed, str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"ddfbench.report.compact: {calls[1]}: cannot be written (No space left on device)")
+    assert err.count("\n") == 1 and len(compact.load_records(str(tmp_path / "out"))) == 1

@@ -163,6 +163,10 @@ def main(argv: list[str] | None = None) -> int:
         except InputError as exc:  # not gzip, cut short: nothing of it written
             print(f"ddfbench.report.compact: {exc}", file=sys.stderr)
             return 2
+        except OSError as exc:  # a read-only or full out_dir: each record is written whole or not at all
+            print(f"ddfbench.report.compact: {exc.filename or args.out}: cannot be written ({exc.strerror or exc}); "
+                  "the records restored before it are whole: run the command again once it can be", file=sys.stderr)
+            return 2
         print(f"restored {written} records into {args.out} ({kept} already there, kept; {left} failed, older, "
               "misnamed or damaged, left out: their runs go again)")
         return 0
@@ -170,7 +174,12 @@ def main(argv: list[str] | None = None) -> int:
     if not records:
         print(f"ddfbench.report.compact: {args.records}: no run records", file=sys.stderr)
         return 2
-    print(f"wrote {len(records)} records to {write_compact(records, args.out)}")
+    try:
+        print(f"wrote {len(records)} records to {write_compact(records, args.out)}")
+    except OSError as exc:  # a read-only or full folder, a missing one: written whole or not at all
+        print(f"ddfbench.report.compact: {args.out}: cannot be written ({exc.strerror or exc}): nothing written",
+              file=sys.stderr)
+        return 2
     return 0
 
 
