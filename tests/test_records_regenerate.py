@@ -528,3 +528,26 @@ def test_compact_into_a_folder_that_cannot_be_written_is_one_line(results, tmp_p
     err = capsys.readouterr().err
     assert err.startswith(f"ddfbench.report.compact: {calls[1]}: cannot be written (No space left on device)")
     assert err.count("\n") == 1 and len(compact.load_records(str(tmp_path / "out"))) == 1
+
+
+def test_a_rebuild_that_fails_midway_leaves_the_committed_report_as_it_was(tmp_path, capsys, monkeypatch):
+    """regenerate --from-records where the disk fills after table.md (table.tex cannot be written): one line naming
+    the folder, exit 2, and every committed file keeps its bytes (the rebuild wrote into the committed folder itself:
+    a new table.md beside the old report.md, an emptied table.tex, then a traceback)."""
+    from ddfbench.report import __main__ as report_module
+
+    reports = tmp_path / "reports"
+    shutil.copytree(os.path.join(ROOT, "reports", "default"), reports / "default")
+    (reports / "default" / "table.md").write_text("hand edit\n")  # so that a rewritten table.md shows
+    before = {p.name: p.read_bytes() for p in (reports / "default").iterdir()}
+
+    def full_disk(*args, **kwargs):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(report_module, "to_latex", full_disk)
+    assert regenerate_main(["--from-records", "--reports", str(reports), "--readme", str(tmp_path / "none.md")]) == 2
+    err = capsys.readouterr().err
+    assert f"{reports / 'default'}: not rebuilt (OSError: [Errno 28] No space left on device)" in err
+    assert "Traceback" not in err
+    assert {p.name: p.read_bytes() for p in (reports / "default").iterdir()} == before
+    assert [p.name for p in reports.iterdir() if p.name.startswith(".report-")] == []

@@ -39,11 +39,11 @@ import tempfile
 import time
 
 from ddfbench.core import plugins
-from ddfbench.core.errors import InputError
+from ddfbench.core.errors import InputError, one_line
 from ddfbench.fit import tune
 from ddfbench.report import compact, index, measured, shape_suite, verdict
 from ddfbench.report import tune as tune_report
-from ddfbench.report.__main__ import OPTIONS_FILE, STATUS_FILE, MixedCommits, write_report
+from ddfbench.report.__main__ import OPTIONS_FILE, STATUS_FILE, MixedCommits, write_report_whole
 from ddfbench.report.claims import write_claims, write_committed_claims
 
 EXPERIMENTS = ("tune", "ablation", "sampling", "representations", "storage", "render_time", "render_shapes",
@@ -77,10 +77,13 @@ def regenerate(experiment: str, results: str, reports: str, overrides: list[str]
     if experiment == tune.EXPERIMENT:
         rc = max(rc, tune_report.main([os.path.join(results, experiment), "--out", out]))
     else:
-        try:
-            write_report(os.path.join(results, experiment), out, note=note, sweep=[f"+experiment={experiment}", *overrides])
-        except (MixedCommits, InputError) as exc:  # resumed across a code change, or a sweep that left no record
-            print(f"{experiment}: no report: {exc}", file=sys.stderr, flush=True)
+        try:  # staged beside the report folder: one that fails midway (a full disk) leaves the old report whole
+            os.makedirs(out, exist_ok=True)
+            write_report_whole(os.path.join(results, experiment), out, note=note,
+                               sweep=[f"+experiment={experiment}", *overrides])
+        except (MixedCommits, InputError, OSError) as exc:  # resumed across a code change, a sweep that left no record
+            print(f"{experiment}: no report: {exc if not isinstance(exc, OSError) else one_line(exc)}", file=sys.stderr,
+                  flush=True)
             return 2
     if seconds is not None:
         with open(os.path.join(out, "wall_time.txt"), "w") as fh:
@@ -99,14 +102,15 @@ def reports_with_records(reports: str) -> list[str]:
 
 def rebuild(folder: str, into: str, draw: bool = True) -> None:
     """Write the report of folder's compact records into `into`, with the options it was written with (draw=False:
-    no image drawn, those `into` holds linked)."""
+    no image drawn, those `into` holds linked), staged (write_report_whole): a rebuild that fails midway leaves `into`
+    as it was."""
     options = {}  # a compact file written by report.compact alone: the report's defaults
     if os.path.isfile(os.path.join(folder, OPTIONS_FILE)):
         with open(os.path.join(folder, OPTIONS_FILE)) as fh:
             options = json.load(fh)
     kinds = tuple(options["plots"]) if options.get("plots") is not None else None
-    write_report(os.path.join(folder, compact.FILE), into, note=options.get("note"), kinds=kinds,
-                 allow_mixed_commits=bool(options.get("allow_mixed_commits")), draw=draw)
+    write_report_whole(os.path.join(folder, compact.FILE), into, note=options.get("note"), kinds=kinds,
+                       allow_mixed_commits=bool(options.get("allow_mixed_commits")), draw=draw)
 
 
 def differences(committed: str, rebuilt: str, whole: bool = False) -> list[str]:
@@ -155,9 +159,10 @@ def from_records(reports: str, check: bool, readme: str | None = None) -> int:
                     shutil.copy2(os.path.join(folder, name), scratch)
                 remake(folder, scratch)
                 differing += [os.path.join(folder, name) for name in differences(folder, scratch, whole=rows)]
-        except InputError as exc:
-            unreadable += 1
-            print(f"ddfbench.report.regenerate: {exc}", file=sys.stderr, flush=True)
+        except (InputError, MixedCommits, OSError) as exc:  # a damaged input, a full or read-only disk: the folder
+            unreadable += 1                                     # stays as it was
+            message = f"{folder}: not rebuilt ({one_line(exc)})" if isinstance(exc, OSError) else str(exc)
+            print(f"ddfbench.report.regenerate: {message}", file=sys.stderr, flush=True)
     generated = {"claims.md": lambda path: write_committed_claims(reports, path),  # the files made from all reports
                  index.FILE: lambda path: index.write_index(reports, path)}
     for name, write in generated.items():
@@ -171,9 +176,10 @@ def from_records(reports: str, check: bool, readme: str | None = None) -> int:
                     write(os.path.join(scratch, name))
                     if not filecmp.cmp(path, os.path.join(scratch, name), shallow=False):
                         differing.append(path)
-        except InputError as exc:
+        except (InputError, OSError) as exc:
             unreadable += 1
-            print(f"ddfbench.report.regenerate: {path} not rebuilt: {exc}", file=sys.stderr, flush=True)
+            message = one_line(exc) if isinstance(exc, OSError) else str(exc)
+            print(f"ddfbench.report.regenerate: {path} not rebuilt: {message}", file=sys.stderr, flush=True)
     for path in differing:
         print(f"ddfbench.report.regenerate: {path} differs from its rebuild from its records", file=sys.stderr)
     if check:
