@@ -551,3 +551,20 @@ def test_a_rebuild_that_fails_midway_leaves_the_committed_report_as_it_was(tmp_p
     assert "Traceback" not in err
     assert {p.name: p.read_bytes() for p in (reports / "default").iterdir()} == before
     assert [p.name for p in reports.iterdir() if p.name.startswith(".report-")] == []
+
+
+def test_the_scratch_folder_a_killed_report_left_is_no_report(tmp_path, capsys):
+    """A report killed midway leaves its scratch folder (.report-*, with a copy of the records) beside the report
+    folder: regenerate --from-records and the index leave it out (they rebuilt it as a report, listed it in index.md
+    and failed the check)."""
+    reports = tmp_path / "reports"
+    shutil.copytree(os.path.join(ROOT, "reports", "default"), reports / "default")
+    scratch = reports / ".report-abcd1234"
+    scratch.mkdir()
+    for name in (compact.FILE, "report_options.json", "report.md"):
+        shutil.copy2(reports / "default" / name, scratch)
+    assert reports_with_records(str(reports)) == [str(reports / "default")]
+    assert index.report_folders(str(reports)) == ["default"]
+    assert regenerate_main(["--from-records", "--reports", str(reports), "--readme", str(tmp_path / "none.md")]) == 0
+    assert ".report-" not in (reports / "index.md").read_text() and "rebuilt " + str(scratch) not in capsys.readouterr().out
+    assert sorted(p.name for p in scratch.iterdir()) == sorted((compact.FILE, "report_options.json", "report.md"))

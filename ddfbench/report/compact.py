@@ -49,9 +49,19 @@ def portable(rec: dict[str, Any]) -> dict[str, Any]:
     return row
 
 
+def walk_visible(root: str) -> Iterable[tuple[str, list[str], list[str]]]:
+    """os.walk(root) less the folders whose name starts with a dot (and all below them): a report's scratch folder
+    (.report-*, write_report_whole) that a killed report left beside it holds a copy of its records, and is no
+    report."""
+    for folder, dirs, files in os.walk(root):
+        dirs[:] = [d for d in dirs if not d.startswith(".")]
+        yield folder, dirs, files
+
+
 def folders_holding(root: str, *names: str) -> list[str]:
-    """Every folder below root (any depth, root included) that holds every one of the named files, sorted."""
-    return sorted(folder for folder, _, files in os.walk(root) if all(name in files for name in names))
+    """Every folder below root (any depth, root included; no hidden one, walk_visible) that holds every one of the
+    named files, sorted."""
+    return sorted(folder for folder, _, files in walk_visible(root) if all(name in files for name in names))
 
 
 def write_jsonl_gz(lines: Iterable[str], path: str) -> str:

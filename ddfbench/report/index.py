@@ -53,7 +53,7 @@ class Provenance:
 
 def report_folders(reports: str) -> list[str]:
     """Every report folder below `reports` (any depth), relative to it, sorted."""
-    return sorted(os.path.relpath(folder, reports) for folder, _, files in os.walk(reports)
+    return sorted(os.path.relpath(folder, reports) for folder, _, files in compact.walk_visible(reports)
                   if folder != reports and any(m in files for m in MARKERS))
 
 

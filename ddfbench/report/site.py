@@ -158,7 +158,7 @@ def write_claims(reports: str, out: str) -> None:
 
 def table_folders(reports: str) -> list[str]:
     """Every folder below reports with a table.csv (a page each), relative to reports, sorted."""
-    return sorted(os.path.relpath(f, reports) for f, _, files in os.walk(reports) if "table.csv" in files)
+    return sorted(os.path.relpath(f, reports) for f, _, files in compact.walk_visible(reports) if "table.csv" in files)
 
 
 def _slug(rel: str) -> str:
@@ -200,7 +200,7 @@ def write_reports(reports: str, out: str) -> list[tuple[str, str, index.Provenan
 
 def write_gallery(reports: str, out: str) -> int:
     """gallery.html: every report's gallery.png (copied under img/); returns how many."""
-    found = sorted(os.path.relpath(f, reports) for f, _, files in os.walk(reports) if "gallery.png" in files)
+    found = sorted(os.path.relpath(f, reports) for f, _, files in compact.walk_visible(reports) if "gallery.png" in files)
     parts = []
     for rel in found:
         target = os.path.join("img", f"{_slug(rel)}-gallery.png")
