@@ -294,3 +294,25 @@ def test_status_refuses_what_the_runner_refuses(capsys):
     assert status.main("/nonexistent/default", ["+experiment=default", "+train.max_step=5"]) == 2
     assert capsys.readouterr().err.startswith("ddfbench.report --status: train.max_step: unknown key (did you mean "
                                               "max_steps")
+
+
+def test_status_passes_over_a_sweep_file_that_cannot_be_read(tmp_path, capsys):
+    """A multirun.yaml cut short or garbled (a sweep killed or out of disk while Hydra wrote it): `--status` names it
+    in one line and takes the sweep before it; named after --status it is one line, exit 2 (both were tracebacks)."""
+    import time
+
+    from ddfbench.report import status
+
+    sweeps = tmp_path / ".hydra" / "sweep"
+    (sweeps / "old").mkdir(parents=True)
+    (sweeps / "old" / "multirun.yaml").write_text("experiment_name: smoke\n")
+    time.sleep(0.01)
+    (sweeps / "new").mkdir()
+    (sweeps / "new" / "multirun.yaml").write_bytes(b"\x00\xff garbage: [")
+    assert status.newest_sweep(str(tmp_path / "smoke")) == str(sweeps / "old" / "multirun.yaml")
+    err = capsys.readouterr().err
+    assert err.startswith(f"ddfbench: skipped {sweeps / 'new' / 'multirun.yaml'}: not a readable sweep file (")
+    assert err.count("\n") == 1
+    assert status.main(str(tmp_path / "smoke"), [str(sweeps / "new" / "multirun.yaml")]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"ddfbench.report --status: {sweeps / 'new' / 'multirun.yaml'}: not a readable sweep file")

@@ -58,12 +58,31 @@ def _without_launcher(overrides: list[str]) -> list[str]:
     return [o for o in overrides if not o.lstrip("+~").startswith(LAUNCHER_PREFIXES)]
 
 
+def load_sweep_file(path: str) -> DictConfig:
+    """A sweep's multirun.yaml; a one-line InputError naming it where it is no YAML mapping (a sweep killed or out
+    of disk while Hydra wrote it)."""
+    try:
+        found = OmegaConf.load(path)
+    except Exception as exc:  # yaml's parse errors, not UTF-8, unreadable
+        raise InputError(f"{path}: not a readable sweep file ({type(exc).__name__}: "
+                         f"{(str(exc).strip().splitlines() or [''])[0]})") from None
+    if not isinstance(found, DictConfig):
+        raise InputError(f"{path}: not a readable sweep file (a YAML {type(found).__name__}, not a mapping)")
+    return found
+
+
 def newest_sweep(records_dir: str) -> str | None:
-    """The newest multirun.yaml beside records_dir whose experiment_name is the folder's name."""
+    """The newest multirun.yaml beside records_dir whose experiment_name is the folder's name; one that cannot be read
+    is passed over with a line on stderr naming it."""
     name = os.path.basename(os.path.normpath(records_dir))
     pattern = os.path.join(os.path.dirname(os.path.abspath(records_dir)), ".hydra", "sweep", "*", "multirun.yaml")
     for path in sorted(glob.glob(pattern), key=os.path.getmtime, reverse=True):
-        if OmegaConf.load(path).get("experiment_name") == name:
+        try:
+            found = load_sweep_file(path)
+        except InputError as exc:
+            print(f"ddfbench: skipped {exc}", file=sys.stderr)
+            continue
+        if found.get("experiment_name") == name:
             return path
     return None
 
@@ -79,7 +98,7 @@ def _master_config(loader: Any, records_dir: str, overrides: list[str]) -> tuple
     else:
         sweep_file = newest_sweep(records_dir)
     if sweep_file is not None:
-        master = OmegaConf.load(sweep_file)
+        master = load_sweep_file(sweep_file)
         with open_dict(master):
             master.hydra.overrides.hydra = _without_launcher(list(master.hydra.overrides.hydra))
         return master, f"the sweep of {sweep_file}"
