@@ -568,3 +568,20 @@ def test_the_scratch_folder_a_killed_report_left_is_no_report(tmp_path, capsys):
     assert regenerate_main(["--from-records", "--reports", str(reports), "--readme", str(tmp_path / "none.md")]) == 0
     assert ".report-" not in (reports / "index.md").read_text() and "rebuilt " + str(scratch) not in capsys.readouterr().out
     assert sorted(p.name for p in scratch.iterdir()) == sorted((compact.FILE, "report_options.json", "report.md"))
+
+
+@pytest.mark.parametrize("text, says", [('{"note": ', "not a readable JSON file (Expecting value"),
+                                        ("[1]", "holds a JSON list, not an object"),
+                                        ('{"plots": "pareto"}', "plots is a str, not a list or null")])
+def test_a_damaged_report_options_file_is_one_line_naming_it(tmp_path, capsys, text, says):
+    """report_options.json cut short, not an object or with a wrong type: one line naming it, exit 2, the report
+    folder as it was (was a traceback)."""
+    reports = tmp_path / "reports"
+    shutil.copytree(os.path.join(ROOT, "reports", "default"), reports / "default")
+    (reports / "default" / "report_options.json").write_text(text)
+    before = {p.name: p.read_bytes() for p in (reports / "default").iterdir()}
+    assert regenerate_main(["--from-records", "--reports", str(reports), "--readme", str(tmp_path / "none.md")]) == 2
+    err = capsys.readouterr().err
+    assert f"ddfbench.report.regenerate: {reports / 'default' / 'report_options.json'}: {says}" in err
+    assert "Traceback" not in err
+    assert {p.name: p.read_bytes() for p in (reports / "default").iterdir()} == before

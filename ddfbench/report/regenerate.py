@@ -39,7 +39,7 @@ import tempfile
 import time
 
 from ddfbench.core import plugins
-from ddfbench.core.errors import InputError, one_line
+from ddfbench.core.errors import InputError, first_line, one_line
 from ddfbench.fit import tune
 from ddfbench.report import compact, index, measured, shape_suite, verdict
 from ddfbench.report import tune as tune_report
@@ -104,10 +104,19 @@ def rebuild(folder: str, into: str, draw: bool = True) -> None:
     """Write the report of folder's compact records into `into`, with the options it was written with (draw=False:
     no image drawn, those `into` holds linked), staged (write_report_whole): a rebuild that fails midway leaves `into`
     as it was."""
-    options = {}  # a compact file written by report.compact alone: the report's defaults
-    if os.path.isfile(os.path.join(folder, OPTIONS_FILE)):
-        with open(os.path.join(folder, OPTIONS_FILE)) as fh:
-            options = json.load(fh)
+    options: dict = {}  # a compact file written by report.compact alone: the report's defaults
+    path = os.path.join(folder, OPTIONS_FILE)
+    if os.path.isfile(path):
+        try:
+            with open(path, encoding="utf-8") as fh:
+                options = json.load(fh)
+        except (OSError, ValueError) as exc:  # cut short, not JSON, not UTF-8: one line naming it
+            raise InputError(f"{path}: not a readable JSON file ({first_line(exc)})") from None
+        if not isinstance(options, dict):
+            raise InputError(f"{path}: holds a JSON {type(options).__name__}, not an object of the report's options")
+        for key, kind in (("note", str), ("plots", list)):
+            if options.get(key) is not None and not isinstance(options[key], kind):
+                raise InputError(f"{path}: {key} is a {type(options[key]).__name__}, not a {kind.__name__} or null")
     kinds = tuple(options["plots"]) if options.get("plots") is not None else None
     write_report_whole(os.path.join(folder, compact.FILE), into, note=options.get("note"), kinds=kinds,
                        allow_mixed_commits=bool(options.get("allow_mixed_commits")), draw=draw)
