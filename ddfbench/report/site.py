@@ -200,7 +200,8 @@ def write_reports(reports: str, out: str) -> list[tuple[str, str, index.Provenan
 
 def write_gallery(reports: str, out: str) -> int:
     """gallery.html: every report's gallery.png (copied under img/); returns how many."""
-    found = sorted(os.path.relpath(f, reports) for f, _, files in compact.walk_visible(reports) if "gallery.png" in files)
+    found = sorted(os.path.relpath(f, reports) for f, _, files in compact.walk_visible(reports)
+                   if "gallery.png" in files)
     parts = []
     for rel in found:
         target = os.path.join("img", f"{_slug(rel)}-gallery.png")

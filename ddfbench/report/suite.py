@@ -92,7 +92,8 @@ def load_suite(name: str) -> dict[str, list[Entry]]:
     for tier, entries in tiers.items():
         out[tier] = []
         if not isinstance(entries, dict | None):
-            raise InputError(f"{where}: tiers.{tier}: needs {{experiment: {{report: ...}}}}, not a {type(entries).__name__}")
+            raise InputError(f"{where}: tiers.{tier}: needs {{experiment: {{report: ...}}}}, not a "
+                             f"{type(entries).__name__}")
         for experiment, spec in (entries or {}).items():
             if not os.path.isfile(os.path.join(CONF_DIR, "experiment", f"{experiment}.yaml")):
                 raise InputError(f"{where}: tiers.{tier}.{experiment}: no conf/experiment/{experiment}.yaml")
