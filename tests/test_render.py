@@ -395,3 +395,14 @@ def test_time_renders_returns_the_cold_result_and_counts_repeats():
     result, timing = time_renders(lambda: calls.append(len(calls)) or len(calls), repeats=3, warmup=2)
     assert result == 1 and len(calls) == 6 and timing.repeats == 3
     assert timing.warm_iqr_s >= 0 and timing.cold_s >= 0
+
+
+@pytest.mark.parametrize("name", ("depth", "normals"))
+def test_a_scene_without_shading_casts_the_pixel_centres_alone_whatever_its_spp(name):
+    """Depth, mask and normal read sample 0 alone: samples 1..spp-1 would be rays (and normals) no output uses."""
+    one = parse_scene(preset(name, width=8, height=6, spp=1))
+    four = parse_scene(preset(name, width=8, height=6, spp=4))
+    f1, c1 = render(AnalyticSphere(0.4), one, plan_passes(one), seed=2)
+    f4, c4 = render(AnalyticSphere(0.4), four, plan_passes(four), seed=2)
+    assert c4 == c1 and c4["primary_rays"] == len(four.cameras) * 8 * 6
+    assert np.array_equal(f4.depth, f1.depth) and np.array_equal(f4.normal, f1.normal)

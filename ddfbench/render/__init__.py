@@ -3,7 +3,8 @@ what the image costs (time, rays, field evaluations) and how wrong it is (agains
 
 The renderer knows only `Representation.intersect`; every query passes the counting layer.
 
-Which passes each preset (conf/scene/) triggers, by `scene.plan_passes`; N = cameras·W·H·spp:
+Which passes each preset (conf/scene/) triggers, by `scene.plan_passes`; N = cameras·W·H·spp (cameras·W·H
+for a scene without shaded or path, whose outputs read the pixel-centre sample alone):
 
 | preset     | outputs                                  | primary | normals | shadow rays         | bounce rays                 |
 |------------|------------------------------------------|---------|---------|---------------------|-----------------------------|

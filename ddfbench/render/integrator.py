@@ -5,7 +5,7 @@ field's errors on secondary rays (shadow, bounce) show up in the image.
 
 Sampling: sample 0 of every pixel goes through the pixel centre and gives the depth, mask and
 normal images; samples 1..spp-1 are jittered uniformly in the pixel, and shaded / path images
-average all spp samples. Random numbers come from streams seeded by (seed, purpose) and are drawn
+average all spp samples (a scene without them casts sample 0 alone: nothing else would read the others). Random numbers come from streams seeded by (seed, purpose) and are drawn
 per primary ray, whatever the geometry, so two families rendered with the same seed use the same
 samples: their image difference is geometry, not noise; and the depth image does not depend on
 what else a scene asks for.
@@ -147,6 +147,9 @@ def render(rep: Representation, scene: Scene, passes: Passes, seed: int) -> tupl
     tracer = CountedTracer(rep, scene.chunk)
     c, s, h, w = len(scene.cameras), scene.spp, scene.height, scene.width
     origins, directions = primary_rays(scene, seed)
+    if not (passes.shaded or passes.path):  # depth, mask and normal read sample 0 alone: cast no other sample
+        origins, directions = (a.reshape(c, s, h * w, 3)[:, 0].reshape(-1, 3) for a in (origins, directions))
+        s = 1
     hits = tracer.cast("primary", origins, directions, normals=passes.normals)
     centre = (slice(None), 0)
     normal = hits.normal if passes.normals else np.zeros((len(hits.t), 3), np.float32)  # zeros on misses
