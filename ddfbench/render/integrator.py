@@ -5,10 +5,10 @@ field's errors on secondary rays (shadow, bounce) show up in the image.
 
 Sampling: sample 0 of every pixel goes through the pixel centre and gives the depth, mask and
 normal images; samples 1..spp-1 are jittered uniformly in the pixel, and shaded / path images
-average all spp samples (a scene without them casts sample 0 alone: nothing else would read the others). Random numbers come from streams seeded by (seed, purpose) and are drawn
-per primary ray, whatever the geometry, so two families rendered with the same seed use the same
-samples: their image difference is geometry, not noise; and the depth image does not depend on
-what else a scene asks for.
+average all spp samples (a scene without them casts sample 0 alone: nothing else would read the
+others). Random numbers come from streams seeded by (seed, purpose) and are drawn per primary ray,
+whatever the geometry, so two families rendered with the same seed use the same samples: their image
+difference is geometry, not noise; and the depth image does not depend on what else a scene asks for.
 
 Secondary rays (ε·scale rule): they start at p + ε·n, n the hit normal facing the incoming ray, ε =
 scene.ray_offset in units of the unit cube (default 1e-3, 0.1 % of the shape's side) — far above
