@@ -393,8 +393,22 @@ def test_depth_scene_reports_only_the_metrics_its_outputs_allow(tmp_path):
 def test_time_renders_returns_the_cold_result_and_counts_repeats():
     calls = []
     result, timing = time_renders(lambda: calls.append(len(calls)) or len(calls), repeats=3, warmup=2)
-    assert result == 1 and len(calls) == 6 and timing.repeats == 3
+    assert result == 1 and len(calls) == 6 and timing.repeats == 3 and timing.warmups == 2
     assert timing.warm_iqr_s >= 0 and timing.cold_s >= 0
+
+
+def test_a_cold_render_that_spends_the_time_budget_leaves_no_warm_up_and_says_so():
+    import time
+
+    calls = []
+
+    def render():
+        calls.append(1)
+        time.sleep(0.02 if len(calls) == 1 else 0.0)  # the cold render alone spends the budget
+        return len(calls)
+
+    _, timing = time_renders(render, repeats=3, warmup=2, max_seconds=0.01)
+    assert len(calls) == 2 and timing.warmups == 0 and timing.repeats == 1  # the "warm" figure is the second render
 
 
 @pytest.mark.parametrize("name", ("depth", "normals"))

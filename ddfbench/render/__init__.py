@@ -83,6 +83,7 @@ def render_scene(rep: Representation, reference: Representation, scene_cfg: Mapp
         "render_warm_iqr_s": timing.warm_iqr_s,
         "rays_per_s": rays_per_s,
         "render_repeats": timing.repeats,
+        "render_warmups": timing.warmups,
         "render_threads": compute_threads(),
         "reference_render_cold_s": ref_timing.cold_s,
         "reference_render_warm_s": ref_timing.warm_s,

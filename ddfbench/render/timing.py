@@ -15,12 +15,14 @@ T = TypeVar("T")
 
 @dataclass
 class RenderTiming:
-    """Seconds: cold (first render), warm median and interquartile range, every warm render in order."""
+    """Seconds: cold (first render), warm median and interquartile range, every warm render in order; how many
+    untimed warm-up renders ran between them."""
 
     cold_s: float
     warm_s: float
     warm_iqr_s: float
     warm_all_s: list[float]
+    warmups: int
 
     @property
     def repeats(self) -> int:
@@ -32,18 +34,20 @@ def time_renders(render: Callable[[], T], repeats: int, warmup: int,
     """Call `render` 1 + warmup + repeats times; return the first (cold) result and the timings.
 
     Once max_seconds of render time are spent, warm-up and repeats stop early (one timed warm
-    render always runs), so a slow family costs seconds, not minutes; RenderTiming.repeats says how many ran.
+    render always runs), so a slow family costs seconds, not minutes; RenderTiming.repeats and .warmups say how many
+    ran (no warm-up where the cold render alone spent max_seconds: the warm figure is then the second render).
     """
     first, cold = timed(render)
-    spent = cold
+    spent, warmups = cold, 0
     for _ in range(warmup):
         if spent >= max_seconds:
             break
         spent += timed(render)[1]
+        warmups += 1
     warm: list[float] = []
     for _ in range(repeats):
         warm.append(timed(render)[1])
         spent += warm[-1]
         if spent >= max_seconds:
             break
-    return first, RenderTiming(cold, *median_iqr(warm), warm)
+    return first, RenderTiming(cold, *median_iqr(warm), warm, warmups)
