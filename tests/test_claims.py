@@ -517,3 +517,16 @@ def test_the_plateau_row_gives_how_far_the_gan_s_error_fell_between_its_last_two
                                            "(a probe without a surface or an epoch count)")
     failed = row([gan(s, 0.5, widest_f=0.0) for s in SEEDS])  # every final mesh off the shape
     assert failed.verdict == claims.NOT_TESTABLE and failed.measured == "no run gave a result"
+
+
+def test_the_ddf_mesh_frame_ratio_names_the_all_core_bvh_of_suite_v1_records():
+    from ddfbench.report.claims import DDF, _all_core_bvh
+
+    def rec(cost):
+        return {"model": DDF, "config": {"oracle": {"backend": "open3d"}}, "env": {"cpu_count": 16},
+                "cost": {"render_threads": 1, **cost}}
+
+    note = _all_core_bvh([rec({})])
+    assert "every core (16, open3d's default), the DDF on 1 thread(s)" in note and "erratum" in note
+    assert _all_core_bvh([rec({"reference_threads": 1})]) == ""  # records of the fixed code say what the BVH used
+    assert _all_core_bvh([{**rec({}), "config": {"oracle": {"backend": "embree"}}}]) == ""
