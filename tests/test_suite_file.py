@@ -329,6 +329,26 @@ def test_a_file_changed_only_by_result_neutral_commits_is_not_stale(monkeypatch,
     assert suite.stale(entry, [record(side, "mesh", "mesh")], neutral) == (side[:7], ["ddfbench/run/runner.py"])
 
 
+def test_a_change_of_the_mesh_family_stales_every_report_it_renders_references_for(monkeypatch, tmp_path):
+    """Every record's reference frame is the full mesh's BVH through the mesh family (render.mesh_reference), so a
+    report of DDF runs alone is stale when that family's code changed."""
+    def git(*args):
+        return subprocess.run(["git", "-C", str(tmp_path), "-c", "user.name=t", "-c", "user.email=t@t", *args],
+                              capture_output=True, text=True, check=True).stdout.strip()
+
+    (tmp_path / "ddfbench" / "models").mkdir(parents=True)
+    (tmp_path / "ddfbench" / "models" / "mesh.py").write_text("cast on every core")
+    git("init", "-q")
+    git("add", "-A")
+    git("commit", "-qm", "ran")
+    ran = git("rev-parse", "HEAD")
+    (tmp_path / "ddfbench" / "models" / "mesh.py").write_text("cast on the run's threads")
+    git("commit", "-qam", "threads")
+    monkeypatch.setattr(suite, "ROOT", str(tmp_path))
+    assert suite.stale(suite.Entry("render_time", "r"), [record(ran, "ddf", "ddf_tuned")]) == (
+        ran[:7], ["ddfbench/models/mesh.py"])
+
+
 def test_a_malformed_result_neutral_entry_is_one_line_naming_it(monkeypatch, tmp_path, capsys):
     (tmp_path / "suite").mkdir()
     monkeypatch.setattr(suite, "CONF_DIR", str(tmp_path))

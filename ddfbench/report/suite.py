@@ -422,8 +422,9 @@ def stale(entry: Entry, records: list[dict[str, Any]],
     shas = sorted({str((r.get("env") or {}).get("code_sha")) for r in records if (r.get("env") or {}).get("code_sha")})
     if not shas:
         return "", []
+    # the mesh family renders every record's reference frame (render.mesh_reference), whatever the record's family
     paths = {"ddfbench/core", "ddfbench/truth", "ddfbench/sampling", "ddfbench/evaluate", "ddfbench/fit",
-             "ddfbench/render", "ddfbench/run", f"conf/experiment/{entry.experiment}.yaml"}
+             "ddfbench/render", "ddfbench/run", "ddfbench/models/mesh.py", f"conf/experiment/{entry.experiment}.yaml"}
     paths |= {os.path.relpath(os.path.join(root, f), ROOT) for root, _, files in os.walk(os.path.join(ROOT, "ddfbench",
               "models")) for f in files if f.startswith("_") and f.endswith(".py") and f != "__init__.py"}
     for rec in records:
