@@ -393,3 +393,12 @@ def test_an_empty_only_is_refused_and_a_reader_that_goes_away_gets_no_traceback(
     err = proc.stderr.read()
     proc.wait(timeout=120)
     assert "Traceback" not in err and "BrokenPipeError" not in err
+
+
+def test_the_plan_counts_the_overrides_run_adds_after_a_double_dash(capsys):
+    assert suite.main(["run", "v1", "--tier", "core", "--only", "default", "--dry-run"]) == 0
+    every_seed = capsys.readouterr().out
+    assert suite.main(["run", "v1", "--tier", "core", "--only", "default", "--dry-run", "--", "seed=0"]) == 0
+    one_seed = capsys.readouterr().out
+    jobs = lambda out: int(out.split()[1])  # noqa: E731  "default  18 jobs ..."
+    assert jobs(every_seed) == 3 * jobs(one_seed)  # the suite's seed=0,1,2, then the command line's seed=0

@@ -256,13 +256,13 @@ def tier_entries(suite: str, tier: str, only: list[str] | None = None) -> list[E
 
 
 def plan(suite: str, tier: str, reports: str = os.path.join(ROOT, "reports"),
-         only: list[str] | None = None) -> list[dict[str, Any]]:
-    """Per experiment of the tier (or of only): jobs, estimated CPU-hours (None when a model has no measured
-    record), sources."""
+         only: list[str] | None = None, extra: list[str] | None = None) -> list[dict[str, Any]]:
+    """Per experiment of the tier (or of only), its sweep with the suite's overrides and then `extra` (those `run`
+    adds to every command line): jobs, estimated CPU-hours (None when a model has no measured record), sources."""
     records = committed_records(reports)
     rows = []
     for entry in tier_entries(suite, tier, only):
-        sweep = expand(entry)
+        sweep = expand(Entry(entry.experiment, entry.report, [*entry.overrides, *(extra or [])]))
         hours, unknown, sources = 0.0, set(), set()
         for job, n in sweep.jobs.items():
             seconds, source = job_seconds(entry, job, records)
@@ -502,7 +502,7 @@ def command(args: argparse.Namespace, overrides: list[str]) -> int:
     if args.only is not None and only is None:
         raise InputError(f"--only {args.only!r}: names no experiment")
     if args.dry_run:
-        print_plan(plan(args.suite, args.tier, only=only))
+        print_plan(plan(args.suite, args.tier, only=only, extra=overrides))
         return 0
     return run(args.suite, args.tier, args.results, overrides, args.from_reports, only)
 
