@@ -186,3 +186,23 @@ def test_devices_and_budget_validation():
     model, step_fn, _ = regression()
     with pytest.raises(InputError, match=r"^train budget max_steps=0, max_seconds=\S+: both must be > 0$"):
         train_loop(model, torch.optim.SGD(model.parameters(), lr=0.1), step_fn, Budget(max_steps=0))
+
+
+def test_grad_clip_bounds_the_gradient_the_optimizer_steps_with_not_other_modules_gradients():
+    """The GAN trains G through the loop (its optimizer) while the module also holds D, whose grads the generator
+    loss fills too: grad_clip is the norm of the stepped parameters' gradient, whatever else the module holds."""
+    torch.manual_seed(0)
+    g, d = torch.nn.Linear(4, 1), torch.nn.Linear(4, 1)
+    opt = torch.optim.SGD(g.parameters(), lr=1.0)
+    x = torch.randn(64, 4) * 10
+    norms = []
+    step = opt.step
+
+    def recording_step(*args, **kwargs):
+        norms.append(float(torch.cat([p.grad.flatten() for p in g.parameters()]).norm()))
+        return step(*args, **kwargs)
+
+    opt.step = recording_step
+    train_loop(torch.nn.ModuleDict({"G": g, "D": d}), opt, lambda i: (g(x) ** 2).mean() + 100 * (d(x) ** 2).mean(),
+               Budget(max_steps=1, max_seconds=1e9), grad_clip=1.0, quiet=True)
+    assert norms == [pytest.approx(1.0, rel=1e-5)]  # G's own gradient is far above 1: clipped to 1, not below

@@ -182,6 +182,7 @@ def train_loop(
         raise InputError(f"train budget max_steps={budget.max_steps}, max_seconds={budget.max_seconds}: both must be > 0")
     schedule = schedule or Schedule()
     base_lrs = [g["lr"] for g in optimizer.param_groups]
+    stepped = [p for g in optimizer.param_groups for p in g["params"]]
     fractions = probe_fractions(int(budget.n_probes)) if probe_fn is not None else []
     stats = FitStats(extra={"device": budget.device})
     curve = _LossCurve()
@@ -235,8 +236,8 @@ def train_loop(
             stats.status, stats.message, stop = "failed", f"step {step}: loss is {float(pending[-1])} (non-finite)", "nonfinite"
             break
         loss.backward()
-        if grad_clip:
-            torch.nn.utils.clip_grad_norm_(module.parameters(), float(grad_clip))
+        if grad_clip:  # the gradient the optimizer steps with: module may hold others (the GAN's D, stepped apart)
+            torch.nn.utils.clip_grad_norm_(stepped, float(grad_clip))
         optimizer.step()
         step += 1
         if step % weight_check_every == 0 and (bad := _first_nonfinite_param(module)) is not None:
