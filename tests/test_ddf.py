@@ -353,3 +353,13 @@ def test_clamp_loss_only_the_printed_clamp_drops_a_near_hit_predicted_beyond_del
     loss.sum().backward()
     assert pred.grad[1] == pred.grad[2] == 0 and (pred.grad[0] > 0) == (mode == "clamp_misses")
     assert torch.equal(pred.grad[3:], torch.tensor([1.0, -1.0]))
+
+
+def test_the_clamp_loss_clamps_from_above_only_as_docs_papers_md_says():
+    """Eq. 8's clamp floors at -delta too; ours does not (docs/papers.md names it): a prediction below -delta keeps
+    its gradient, one above delta has none in mode clamp."""
+    from ddfbench.models.ddf.fit import clamp_loss
+
+    pred = torch.tensor([-2.0, 2.0], requires_grad=True)
+    clamp_loss(pred, torch.tensor([0.5, 0.5]), torch.tensor([True, True]), 1.0, "clamp").sum().backward()
+    assert pred.grad.tolist() == [-1.0, 0.0]

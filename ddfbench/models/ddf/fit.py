@@ -22,7 +22,11 @@ def clamp_loss(pred: torch.Tensor, t: torch.Tensor, hit: torch.Tensor, delta: fl
     """The paper's Eq. 8 per sample, |clamp(y, delta) - clamp(y_hat, delta)|, misses labelled delta; pred, t,
     hit (N,), distances in unit-cube units. mode "clamp": as printed, so a prediction beyond delta gets no
     gradient whatever its label; "clamp_misses": the prediction is clamped only where the label is delta
-    (misses, far hits), so a near hit predicted beyond delta is still pulled back."""
+    (misses, far hits), so a near hit predicted beyond delta is still pulled back.
+
+    Both clamp from above only, min(., delta): the paper's clamp(x, delta) = min(delta, max(-delta, x)) also
+    floors at -delta, where a prediction below -delta gets no gradient; here it gets the full one (labels are
+    >= 0, so only predictions below -delta differ)."""
     target = torch.where(hit, t.clamp(max=delta), delta)
     clamped = pred.clamp(max=delta)
     if mode == "clamp_misses":
