@@ -9,6 +9,13 @@
               seconds" runs. The steps taken vary with the machine and its load, so such records are
               labelled "wall-clock" in the record (fit.budget) and in every table.
 The record's fit.budget is the bound that ended the fit, fit.epochs the passes over the labels it made.
+
+An epoch counts draws, not distinct labels: every family draws its batches with replacement (torch.randint), so
+one epoch shows about 1 - 1/e = 63 % of the labels at least once (40 epochs: all of them). And `batch` is the
+model's whole batch: the DDF with a visibility head fills entry_share of it with entry labels
+(ddfbench.models.ddf.fit.line_entry_labels), which the label count leaves out, so there an epoch draws
+(1 - entry_share) x the labels (0.75 at the ddf preset's 0.25: reports/ablation's fit.epochs 1.000 is 0.750
+passes over its ray samples).
 """
 
 from __future__ import annotations
