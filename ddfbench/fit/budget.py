@@ -8,7 +8,7 @@
   wall-clock  train.max_seconds of training (or max_steps if set, whichever ends first): "what do I get in N
               seconds" runs. The steps taken vary with the machine and its load, so such records are
               labelled "wall-clock" in the record (fit.budget) and in every table.
-The record's fit.budget is the bound that ended the fit, fit.epochs the passes over the labels it made.
+The record's fit.budget is the bound that ended the fit, fit.epochs steps x batch / labels (draws, as below).
 
 An epoch counts draws, not distinct labels: every family draws its batches with replacement (torch.randint), so
 one epoch shows about 1 - 1/e = 63 % of the labels at least once (40 epochs: all of them). And `batch` is the
