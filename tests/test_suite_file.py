@@ -117,6 +117,21 @@ def sha(rev):
     return subprocess.run(["git", "-C", ROOT, "rev-parse", rev], capture_output=True, text=True, check=True).stdout.strip()
 
 
+def repo_with(folder, path, text):
+    """A git repository in folder whose one commit holds `path` with `text`: (git, that commit), git run in folder
+    (its output, stripped) as a committer named t."""
+    def git(*args):
+        return subprocess.run(["git", "-C", str(folder), "-c", "user.name=t", "-c", "user.email=t@t", *args],
+                              capture_output=True, text=True, check=True).stdout.strip()
+
+    (folder / path).parent.mkdir(parents=True)
+    (folder / path).write_text(text)
+    git("init", "-q")
+    git("add", "-A")
+    git("commit", "-qm", "ran")
+    return git, git("rev-parse", "HEAD")
+
+
 def record(commit, family, model):
     return {"env": {"code_sha": commit}, "family": family, "model": model}
 
@@ -295,21 +310,13 @@ def test_the_plan_says_which_experiments_add_sweeps_it_does_not_count(capsys):
 def test_a_file_changed_only_by_result_neutral_commits_is_not_stale(monkeypatch, tmp_path):
     """A commit the suite file declares result-neutral (it changed the stale scope, no measured value) is not
     counted; a later change of the same file is."""
-    def git(*args):
-        return subprocess.run(["git", "-C", str(tmp_path), "-c", "user.name=t", "-c", "user.email=t@t", *args],
-                              capture_output=True, text=True, check=True).stdout.strip()
+    git, ran = repo_with(tmp_path, "ddfbench/run/runner.py", "ran")
 
     def commit(text):
         (tmp_path / "ddfbench" / "run" / "runner.py").write_text(text)
         git("commit", "-qam", text)
         return git("rev-parse", "HEAD")
 
-    (tmp_path / "ddfbench" / "run").mkdir(parents=True)
-    (tmp_path / "ddfbench" / "run" / "runner.py").write_text("ran")
-    git("init", "-q")
-    git("add", "-A")
-    git("commit", "-qm", "ran")
-    ran = git("rev-parse", "HEAD")
     monkeypatch.setattr(suite, "ROOT", str(tmp_path))
     monkeypatch.setattr(suite, "CONF_DIR", str(tmp_path / "conf"))
     entry, recs = suite.Entry("default", "reports/default"), [record(ran, "mesh", "mesh")]
@@ -332,16 +339,7 @@ def test_a_file_changed_only_by_result_neutral_commits_is_not_stale(monkeypatch,
 def test_a_change_of_the_mesh_family_stales_every_report_it_renders_references_for(monkeypatch, tmp_path):
     """Every record's reference frame is the full mesh's BVH through the mesh family (render.mesh_reference), so a
     report of DDF runs alone is stale when that family's code changed."""
-    def git(*args):
-        return subprocess.run(["git", "-C", str(tmp_path), "-c", "user.name=t", "-c", "user.email=t@t", *args],
-                              capture_output=True, text=True, check=True).stdout.strip()
-
-    (tmp_path / "ddfbench" / "models").mkdir(parents=True)
-    (tmp_path / "ddfbench" / "models" / "mesh.py").write_text("cast on every core")
-    git("init", "-q")
-    git("add", "-A")
-    git("commit", "-qm", "ran")
-    ran = git("rev-parse", "HEAD")
+    git, ran = repo_with(tmp_path, "ddfbench/models/mesh.py", "cast on every core")
     (tmp_path / "ddfbench" / "models" / "mesh.py").write_text("cast on the run's threads")
     git("commit", "-qam", "threads")
     monkeypatch.setattr(suite, "ROOT", str(tmp_path))
