@@ -158,3 +158,16 @@ def test_empty_reconstruction_scores_the_radii_a_run_measures():
     full = metrics.geometry_metrics(sphere, sphere, 1000, [0.05], seed=0, with_point_to_surface=False)
     none = metrics.geometry_metrics(sphere, empty, 1000, [0.05], seed=0, with_point_to_surface=False)
     assert set(none["fscore"]) == set(full["fscore"]) == {"0.05"} and none["fscore"]["0.05"] == 0.0
+
+
+def test_normal_consistency_ignores_orientation():
+    """Normal consistency is the unsigned cosine: a reconstruction wound inside out (every normal flipped, as
+    marching cubes on a negated field gives) scores the same as the same surface wound outward, both near 1.
+    Kills dropping either np.abs in matched_normal_consistency (the flipped mesh would score near -1 or 0)."""
+    sphere = trimesh.creation.icosphere(4, 0.5)
+    flipped = trimesh.Trimesh(sphere.vertices, sphere.faces[:, ::-1], process=False)
+    same = metrics.geometry_metrics(sphere, sphere, 2000, [0.01], seed=0, noise_floor=False, with_point_to_surface=False)
+    inside_out = metrics.geometry_metrics(sphere, flipped, 2000, [0.01], seed=0, noise_floor=False,
+                                          with_point_to_surface=False)
+    assert same["normal_consistency"] > 0.95
+    assert np.isclose(inside_out["normal_consistency"], same["normal_consistency"])
