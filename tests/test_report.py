@@ -582,6 +582,30 @@ def test_paired_settings_are_separated_by_their_holm_adjusted_p():
     assert seps == ["yes"] + ["no"] * 5 and "Holm-adjusted across the table's 6 settings" in md
 
 
+def test_sampling_strategies_pair_at_matched_label_counts_and_the_ratio_column_is_the_geometric_mean():
+    """The sampling design pairs records on (shape, seed, labels): a strategy at half the baseline's chamfer at every
+    label count has ratio 0.5 over all six pairs. Pairing on (shape, seed) alone would pair runs of different label
+    counts (and count 3 pairs); a table printing the mean log ratio instead of its exp would print -0.693, not 0.5."""
+    from ddfbench.report import paired
+
+    noise = (1.0, 1.1, 0.9)
+    recs = []
+    for strat, labels, scale in (("random", (1000, 4000), 1.0), ("surface", (4000, 1000), 0.5)):
+        for n in labels:
+            for s in (0, 1, 2):
+                chamfer = (4e-3 if n == 1000 else 1e-3) * noise[s] * scale * (1 + 0.01 * s * (strat == "surface"))
+                recs.append(make_record(seed=s, sampling={"strategy": strat, "n_samples": n}, chamfer=chamfer))
+    (row,) = paired.compare_settings(recs, "chamfer_l2", paired.strategy, "random", paired.strategy_pair_key)
+    assert row["setting"] == "surface" and row["ratio"].n == 6 and row["diff"].n == 6
+    assert math.exp(row["ratio"].mean) == pytest.approx(0.5 * (1.01 * 1.02) ** (1 / 3))
+    md = paired.paired_report("sampling", recs, metrics=("chamfer_l2",))
+    (line,) = [x for x in md.splitlines() if x.startswith("| surface |")]
+    cells = [c.strip() for c in line.strip("|").split("|")]
+    assert cells[1] == "6" and cells[4] == "0.505"  # geometric mean of 0.5, 0.505, 0.51 (twice each)
+    lo, hi = (float(x) for x in cells[5].strip("[]").split(","))
+    assert 0.49 < lo < 0.505 < hi < 0.52
+
+
 def test_a_report_commit_between_runs_is_not_a_code_change(tmp_path):
     recs = [make_record(seed=0), make_record(seed=1)]
     recs[0]["env"] = {"git_sha": "abc", "code_sha": "c0de"}
