@@ -606,6 +606,15 @@ def test_sampling_strategies_pair_at_matched_label_counts_and_the_ratio_column_i
     assert 0.49 < lo < 0.505 < hi < 0.52
 
 
+def test_a_zero_value_leaves_its_pair_out_of_the_ratio_not_the_difference():
+    from ddfbench.report import paired
+
+    a, b = {("s", 0): 1.0, ("s", 1): 2.0, ("s", 2): 3.0}, {("s", 0): 0.0, ("s", 1): 1.0, ("s", 2): 1.5}
+    assert paired.difference(a, b).n == 3 and paired.log_ratio(a, b).n == 2
+    assert paired.log_ratio(a, b).mean == pytest.approx(math.log(2.0))
+    assert paired.log_ratio(b, a).n == 2
+
+
 def test_a_report_commit_between_runs_is_not_a_code_change(tmp_path):
     recs = [make_record(seed=0), make_record(seed=1)]
     recs[0]["env"] = {"git_sha": "abc", "code_sha": "c0de"}
