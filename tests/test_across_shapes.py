@@ -67,3 +67,13 @@ def test_a_bounded_metric_interval_stays_inside_zero_one(values):
 def test_a_positive_metric_interval_stays_positive(values):
     got = ax.geometric({f"s{i}": v for i, v in enumerate(values)})
     assert 0.0 < got.lo <= got.center * (1 + 1e-12) and got.center <= got.hi * (1 + 1e-12)
+
+
+def test_a_ratio_equal_to_the_tested_value_on_every_shape_is_not_rejected():
+    """With no spread the t test is degenerate: p is 0 when the constant ratio differs from the tested one and 1 when
+    it is that ratio (an equivalence bound met exactly, or ratio 1 under H0). Kills ratio_p returning 0 for both."""
+    a, b = {"a": 2.0, "b": 4.0, "c": 6.0}, {"a": 1.0, "b": 2.0, "c": 3.0}
+    assert ax.ratio_p(a, b) == 0.0 and ax.ratio_p(a, b, against=2.0) == 1.0
+    assert ax.ratio_p(b, b) == 1.0 and ax.ratio(b, b).p == 1.0
+    assert math.isnan(ax.ratio_p({"a": 2.0}, {"a": 1.0}))  # one shape: no test
+
