@@ -330,3 +330,21 @@ def test_a_dataset_key_names_a_caster_other_than_open3d_and_keeps_open3ds_commit
                                  rec["sampling"]["kind"], rec["config"]["seed"]) for backend in ("open3d", "embree")}
     assert rec["artifacts"]["dataset"].endswith(f"-{keys['open3d']}.npz")  # the key its record names
     assert keys["embree"] != keys["open3d"]  # a warp or embree draw is not served to an open3d run
+
+
+@pytest.mark.parametrize("rule", ["stratified", "geometric"])
+def test_marching_distances_draw_once_in_each_stratum(rng, rule):
+    """stratified: column k in [lo + k/s_p (hi - lo), lo + (k+1)/s_p (hi - lo)]; geometric: the same strata of the
+    log distance, [lo (hi/lo)^(k/s_p), lo (hi/lo)^((k+1)/s_p)]. Kills a warped geometric exponent (frac squared) and
+    strata that are not equal, which the range and order checks above let through."""
+    lo, hi, s_p = 1e-3, rng.uniform(0.05, 1.0, 2000), 5
+    t = marching_distances(rule, s_p, lo, hi, rng)
+    k = np.arange(s_p)
+    if rule == "stratified":
+        lower, upper = lo + k / s_p * (hi[:, None] - lo), lo + (k + 1) / s_p * (hi[:, None] - lo)
+    else:
+        lower, upper = lo * (hi[:, None] / lo) ** (k / s_p), lo * (hi[:, None] / lo) ** ((k + 1) / s_p)
+    assert np.all(t >= lower * (1 - 1e-12)) and np.all(t <= upper * (1 + 1e-12))
+    # and uniform within its stratum: the draw sits in the stratum's lower half about half the time
+    mid = (lower + upper) / 2 if rule == "stratified" else np.sqrt(lower * upper)
+    assert abs((t < mid).mean() - 0.5) < 0.03
