@@ -348,3 +348,21 @@ def test_marching_distances_draw_once_in_each_stratum(rng, rule):
     # and uniform within its stratum: the draw sits in the stratum's lower half about half the time
     mid = (lower + upper) / 2 if rule == "stratified" else np.sqrt(lower * upper)
     assert abs((t < mid).mean() - 0.5) < 0.03
+
+
+def test_perpendicular_misses_go_both_ways_about_the_escaping_ray(sphere, tmp_path):
+    """An escaping ray (x, theta; inf) also gives (x, u; inf) and (x, -u; inf), u perpendicular to theta (the paper's
+    theta +- pi/2; on a sphere from outside, both miss only where the ray leaves the sphere's tangent region, so some
+    x keep both). Kills casting the same side twice."""
+    cfg = config("surface", s_dr=4, s_p=4, perpendicular=True)
+    samples, _, _ = build(sphere, Oracle(sphere.mesh), cfg, "rays", 0, str(tmp_path))
+    miss = ~samples.hit
+    x, d = samples.x[miss], samples.d[miss].astype(np.float64)
+    _, group, count = np.unique(x, axis=0, return_inverse=True, return_counts=True)
+    group = group.ravel()
+    triples = np.flatnonzero(count == 3)
+    assert len(triples) > 50 and count.max() == 3
+    order = np.argsort(group, kind="stable")  # each x's labels in the order written: escape, +u, -u
+    rows = order[np.isin(group[order], triples)].reshape(-1, 3)
+    theta, plus, minus = d[rows[:, 0]], d[rows[:, 1]], d[rows[:, 2]]
+    assert np.abs((theta * plus).sum(1)).max() < 1e-5 and np.abs(plus + minus).max() < 1e-5
