@@ -366,3 +366,13 @@ def test_perpendicular_misses_go_both_ways_about_the_escaping_ray(sphere, tmp_pa
     rows = order[np.isin(group[order], triples)].reshape(-1, 3)
     theta, plus, minus = d[rows[:, 0]], d[rows[:, 1]], d[rows[:, 2]]
     assert np.abs((theta * plus).sum(1)).max() < 1e-5 and np.abs(plus + minus).max() < 1e-5
+
+
+def test_a_marching_distance_below_the_least_height_is_rejected_as_grazing(sphere, tmp_path):
+    """A sample less than TOL above its face plane is rejected (`grazing`): with t_min 1e-7 and geometric steps many
+    first steps are that close. Kills a grazing test that never fires."""
+    cfg = config("surface", face_mode="per_face", s_fc=1, s_dr=2, s_p=4, steps="geometric", t_min=1e-7,
+                 perpendicular=False)
+    samples, _, info = build(sphere, Oracle(sphere.mesh), cfg, "rays", 0, str(tmp_path))
+    assert info["rejected"]["grazing"] > 0.05 * info["candidates"]
+    assert samples.t[samples.hit].min() >= 1e-5
