@@ -376,3 +376,13 @@ def test_a_marching_distance_below_the_least_height_is_rejected_as_grazing(spher
     samples, _, info = build(sphere, Oracle(sphere.mesh), cfg, "rays", 0, str(tmp_path))
     assert info["rejected"]["grazing"] > 0.05 * info["candidates"]
     assert samples.t[samples.hit].min() >= 1e-5
+
+
+def test_pov_marching_samples_crowd_toward_the_hit(sphere, tmp_path):
+    """pov with s_p > 0 places its samples back from the first hit by the steps rule: with geometric steps from
+    t_min 1e-3 most hit labels are short (the log strata put half the draws within sqrt(t_min t_hit) of the hit).
+    Kills placing them forward from the box entry (labels then run nearly the whole way to the hit)."""
+    cfg = config("pov", resolution=16, s_p=4, steps="geometric")
+    samples, _, _ = build(sphere, Oracle(sphere.mesh), cfg, "rays", 0, str(tmp_path))
+    t = samples.t[samples.hit]
+    assert len(t) > 1000 and np.median(t) < 0.02
