@@ -386,3 +386,16 @@ def test_pov_marching_samples_crowd_toward_the_hit(sphere, tmp_path):
     samples, _, _ = build(sphere, Oracle(sphere.mesh), cfg, "rays", 0, str(tmp_path))
     t = samples.t[samples.hit]
     assert len(t) > 1000 and np.median(t) < 0.02
+
+
+def test_sdf_sigmas_cycle_within_each_surface_points_offsets(rng, tmp_path):
+    """Each surface point's s_dr x s_p offsets cycle through sdf_sigmas (rows alternate 1e-4, 0.05 here), so the band
+    is the same everywhere on the surface. Kills np.repeat for np.tile (the first points all get the small sigma)."""
+    cfg = config("surface", face_mode="per_face", s_fc=1, s_dr=1, s_p=2, sdf_sigmas=[1e-4, 0.05], sdf_uniform=0.0,
+                 box=1.0)
+    sphere = load_shape({"name": "sphere"})
+    samples, _, info = build(sphere, Oracle(sphere.mesh), cfg, "sdf", 0, str(tmp_path))
+    assert info["rejected"].get("outside_box", 0) == 0 and len(samples) == 2 * info["n_points"]
+    near, far = np.abs(samples.sdf[0::2]), np.abs(samples.sdf[1::2])
+    assert np.median(near) < 5e-4 and np.median(far) > 0.01
+    assert np.median(near[: len(near) // 2]) < 5e-4 and np.median(far[: len(far) // 2]) > 0.01
