@@ -420,3 +420,27 @@ def test_a_scene_without_shading_casts_the_pixel_centres_alone_whatever_its_spp(
     f4, c4 = render(AnalyticSphere(0.4), four, plan_passes(four), seed=2)
     assert c4 == c1 and c4["primary_rays"] == len(four.cameras) * 8 * 6
     assert np.array_equal(f4.depth, f1.depth) and np.array_equal(f4.normal, f1.normal)
+
+
+# ---- sampling of the integrator ------------------------------------------------------------------
+def test_bounce_directions_are_cosine_weighted_about_the_normal():
+    """cosine_directions: unit vectors in the normal's hemisphere with density cos θ / π, so P(cos θ > c) = 1 - c²
+    and E[cos θ] = 2/3, with no preferred azimuth. The throughput update (times albedo, no cos/pdf factor) is only
+    right for this density; the closed-form sphere test cannot see it (every direction hits the wall the same).
+    Kills r = u for r = sqrt(u)."""
+    from ddfbench.render.integrator import cosine_directions
+
+    rng = np.random.default_rng(3)
+    n = rng.normal(size=(200000, 3))
+    n[:1000] = [0.0, 0.0, -1.0]  # the branch of the orthonormal basis for normals facing -z
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    d = cosine_directions(n, rng.random((len(n), 2))).astype(np.float64)
+    cos = np.einsum("ij,ij->i", d, n)
+    assert np.allclose(np.linalg.norm(d, axis=1), 1, atol=1e-6) and cos.min() >= 0
+    assert abs(cos.mean() - 2 / 3) < 3e-3
+    for c in (0.25, 0.5, 0.9):
+        assert abs((cos > c).mean() - (1 - c * c)) < 5e-3
+    for normal in ([0.0, 0.0, 1.0], [0.0, 0.0, -1.0], [0.6, -0.48, 0.64]):  # no preferred azimuth about any normal
+        fixed = np.tile(normal, (40000, 1))
+        tangent = cosine_directions(fixed, rng.random((40000, 2))).astype(np.float64) @ (np.eye(3) - np.outer(normal, normal))
+        assert np.abs(tangent.mean(axis=0)).max() < 0.01
