@@ -444,3 +444,20 @@ def test_bounce_directions_are_cosine_weighted_about_the_normal():
         fixed = np.tile(normal, (40000, 1))
         tangent = cosine_directions(fixed, rng.random((40000, 2))).astype(np.float64) @ (np.eye(3) - np.outer(normal, normal))
         assert np.abs(tangent.mean(axis=0)).max() < 0.01
+
+
+def test_an_escaping_bounce_sees_the_environment_through_the_albedo():
+    """A floor lit by nothing (the one light shines from below) under an environment L: every bounce from its top
+    escapes, so its path radiance is exactly ρ·L (ρ the throughput of the one bounce). Kills adding the
+    environment without the path's throughput."""
+    floor = trimesh.creation.box(extents=(1.1, 0.02, 1.1))
+    rep = mesh_rep(floor)
+    rho, env = 0.6, 0.5
+    cfg = preset("path", width=24, height=24, spp=2, max_depth=2, albedo=rho, environment=env, background=0.0,
+                 lights=[{"type": "directional", "direction": [0.0, 1.0, 0.0], "intensity": 1.0}],
+                 cameras={"n": 1, "radius": 1.0, "elevation_deg": 70.0, "fov_deg": 30.0})
+    scene = parse_scene(cfg)
+    frames, counts = render(rep, scene, plan_passes(scene), seed=0)
+    top = frames.mask[0] & (np.abs(frames.normal[0][..., 1] - 1.0) < 1e-4)
+    assert top.sum() > 200 and counts["bounce_rays"] > 0
+    assert np.allclose(frames.images["path"][0][top], rho * env, rtol=1e-5)
