@@ -461,3 +461,21 @@ def test_an_escaping_bounce_sees_the_environment_through_the_albedo():
     top = frames.mask[0] & (np.abs(frames.normal[0][..., 1] - 1.0) < 1e-4)
     assert top.sum() > 200 and counts["bounce_rays"] > 0
     assert np.allclose(frames.images["path"][0][top], rho * env, rtol=1e-5)
+
+
+def test_the_shadow_share_of_a_pixel_averages_its_samples():
+    """With spp > 1 a pixel across the shadow's edge is partly shadowed: the shadow image is the mean over the
+    pixel's samples (some values strictly between 0 and 1), not the centre sample's 0 or 1."""
+    floor = trimesh.creation.box(extents=(1.0, 0.02, 1.0))
+    floor.apply_translation([0, -0.41, 0])
+    ball = trimesh.creation.icosphere(4, 0.15)
+    ball.apply_translation([0, -0.1, 0])
+    cfg = preset("shaded", width=24, height=24, spp=8, albedo=0.5,
+                 lights=[{"type": "directional", "direction": [0.0, -1.0, 0.0], "intensity": 2.0}],
+                 cameras={"n": 1, "radius": 2.0, "elevation_deg": 60.0, "fov_deg": 35.0})
+    scene = parse_scene(cfg)
+    frames, _ = render(mesh_rep(trimesh.util.concatenate([floor, ball])), scene, plan_passes(scene), seed=0)
+    shadow = frames.shadow[0]
+    partial = (shadow > 0) & (shadow < 1)
+    assert partial.sum() >= 3 and (shadow == 1).sum() >= 1
+    assert np.allclose(shadow * 8, np.round(shadow * 8), atol=1e-5)  # eighths: one light, eight samples
