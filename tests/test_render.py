@@ -479,3 +479,26 @@ def test_the_shadow_share_of_a_pixel_averages_its_samples():
     partial = (shadow > 0) & (shadow < 1)
     assert partial.sum() >= 3 and (shadow == 1).sum() >= 1
     assert np.allclose(shadow * 8, np.round(shadow * 8), atol=1e-5)  # eighths: one light, eight samples
+
+
+def test_jittered_samples_spread_over_the_whole_pixel_about_its_centre():
+    """Samples 1..spp-1 of a pixel are uniform over the pixel: their mean direction is the centre sample's, and they
+    reach within a few % of its half-width. Kills an off-centre jitter (its mean leaves the pixel centre)."""
+    w = h = 8
+    cfg = preset("shaded", width=w, height=h, spp=64, cameras={"n": 1, "radius": 2.0, "elevation_deg": 0.0,
+                                                               "fov_deg": 40.0})
+    scene = parse_scene(cfg)
+    _, d = primary_rays(scene, seed=2)
+    d = d.astype(np.float64).reshape(64, h, w, 3)
+    cam = scene.cameras[0]
+    forward = (cam.look_at - cam.position) / np.linalg.norm(cam.look_at - cam.position)
+    right = np.cross(forward, cam.up)
+    right /= np.linalg.norm(right)
+    up = np.cross(right, forward)
+    # image-plane coordinates in pixels: tan of the angle over the pixel's size in tan units
+    pixel = 2 * math.tan(math.radians(40.0 / 2)) / h
+    z = d @ forward
+    px, py = (d @ right) / z / pixel, (d @ up) / z / pixel
+    off_x, off_y = px[1:] - px[0], py[1:] - py[0]
+    assert abs(off_x.mean()) < 0.02 and abs(off_y.mean()) < 0.02
+    assert 0.45 < np.abs(off_x).max() <= 0.5 + 1e-4 and 0.45 < np.abs(off_y).max() <= 0.5 + 1e-4
