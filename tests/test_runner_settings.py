@@ -17,3 +17,12 @@ def test_a_label_subset_may_take_every_label_the_strategy_gave_but_not_one_more(
     over = runner.run(compose(*FIT, "train.n_labels=2001", out_dir=tmp_path))
     assert over["status"] == "failed" and over["error"].startswith("train.n_labels=2001: sampling=random gave only 2000")
 
+
+def test_eval_noise_floor_false_leaves_the_floor_out_of_the_record(tmp_path):
+    """eval.noise_floor=false skips the GT-against-GT resample (its metrics are absent), true records it.
+    Kills the runner ignoring eval.noise_floor."""
+    mesh = ("shape=cube", "model=mesh")
+    without = runner.run(compose(*mesh, "eval.noise_floor=false", out_dir=tmp_path))
+    with_floor = runner.run(compose(*mesh, "eval.noise_floor=true", out_dir=tmp_path))
+    assert without["status"] == with_floor["status"] == "ok"
+    assert "noise_floor" not in without["metrics"] and with_floor["metrics"]["noise_floor"]["chamfer_l2"] > 0
