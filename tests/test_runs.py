@@ -168,6 +168,23 @@ def test_a_writer_that_fails_midway_leaves_the_old_file_and_no_temporary(tmp_pat
     assert oct(os.stat(path).st_mode & 0o777) == oct(0o666 & ~mask)  # not mkstemp's 0600
 
 
+def test_an_interrupt_midway_leaves_the_old_file_and_no_temporary(tmp_path):
+    """Ctrl-C (KeyboardInterrupt, not an Exception) inside the writer still removes the temporary file. Kills
+    catching Exception for BaseException in atomic._publish."""
+    from ddfbench.core.atomic import write_atomic
+
+    path = tmp_path / "record.json"
+    path.write_text("old")
+
+    def interrupted(fh):
+        fh.write("new, cut")
+        raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        write_atomic(str(path), interrupted)
+    assert path.read_text() == "old" and os.listdir(tmp_path) == ["record.json"]
+
+
 def test_a_filesystem_that_refuses_modes_still_gets_the_file_and_a_killed_write_s_temporary_is_found(tmp_path,
                                                                                                      monkeypatch):
     from ddfbench.core import atomic
