@@ -185,6 +185,18 @@ def test_an_interrupt_midway_leaves_the_old_file_and_no_temporary(tmp_path):
     assert path.read_text() == "old" and os.listdir(tmp_path) == ["record.json"]
 
 
+def test_leftovers_finds_the_temporary_of_a_name_with_glob_characters(tmp_path):
+    """A file name holding [ ] or * (a shape file name, a key) still finds its own killed write's temporary, and
+    only its own. Kills leftovers dropping glob.escape of the name."""
+    from ddfbench.core.atomic import leftovers
+
+    path = tmp_path / "bunny[1].json"
+    mine, other = tmp_path / ".bunny[1].json.abc123.tmp", tmp_path / ".bunny1.json.abc123.tmp"
+    mine.write_text("cut")
+    other.write_text("cut")
+    assert leftovers(str(path)) == [str(mine)]
+
+
 def test_a_filesystem_that_refuses_modes_still_gets_the_file_and_a_killed_write_s_temporary_is_found(tmp_path,
                                                                                                      monkeypatch):
     from ddfbench.core import atomic
