@@ -530,3 +530,21 @@ def test_the_ddf_mesh_frame_ratio_names_the_all_core_bvh_of_suite_v1_records():
     assert "every core (16, open3d's default), the DDF on 1 thread(s)" in note and "erratum" in note
     assert _all_core_bvh([rec({"reference_threads": 1})]) == ""  # records of the fixed code say what the BVH used
     assert _all_core_bvh([{**rec({}), "config": {"oracle": {"backend": "embree"}}}]) == ""
+
+
+def test_below_needs_the_whole_interval_on_one_side_and_the_holm_p():
+    """below(s, bound): confirmed only when the interval's upper end is below the bound, refuted when its lower end is
+    above, else not separable; with p_holm a side also needs p_holm < 0.05 (the raw interval can clear the bound
+    while the family's correction does not). Kills judging by the lower end alone and dropping the Holm gate, which
+    the ordering claims' synthetic records (all far from the bound) let through."""
+    from ddfbench.report.stats import Summary
+
+    clear, straddles, above = (Summary(-1.0, 0.3, 3, -2.0, -0.5), Summary(-0.5, 0.5, 3, -2.0, 0.5),
+                               Summary(1.0, 0.3, 3, 0.5, 2.0))
+    assert claims.below(clear, 0.0) == claims.CONFIRMED
+    assert claims.below(straddles, 0.0) == claims.NOT_SEPARABLE
+    assert claims.below(above, 0.0) == claims.REFUTED
+    assert claims.below(clear, 0.0, p_holm=0.01) == claims.CONFIRMED
+    assert claims.below(clear, 0.0, p_holm=0.06) == claims.NOT_SEPARABLE  # raw interval clear, Holm p not
+    assert claims.below(above, 0.0, p_holm=0.06) == claims.NOT_SEPARABLE
+    assert claims.below(Summary(-1.0, float("nan"), 1, float("nan"), float("nan")), 0.0) == claims.NOT_SEPARABLE
