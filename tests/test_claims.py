@@ -548,3 +548,18 @@ def test_below_needs_the_whole_interval_on_one_side_and_the_holm_p():
     assert claims.below(clear, 0.0, p_holm=0.06) == claims.NOT_SEPARABLE  # raw interval clear, Holm p not
     assert claims.below(above, 0.0, p_holm=0.06) == claims.NOT_SEPARABLE
     assert claims.below(Summary(-1.0, float("nan"), 1, float("nan"), float("nan")), 0.0) == claims.NOT_SEPARABLE
+
+
+def test_as_accurate_needs_the_whole_ratio_interval_at_or_below_the_equivalence_bound():
+    """'As accurate' (ratio a/b at most EQUIVALENCE = 1.5): an interval reaching above 1.5 is not separable even when
+    its centre is below; at the bound exactly counts; wholly above is refuted; a Holm p of 0.05 or more leaves either
+    side unjudged. Kills judging by the centre, which the two extreme synthetic cases (1.05, 8.0) let through."""
+    from ddfbench.report.across_shapes import OverShapes
+
+    assert claims.EQUIVALENCE == 1.5
+    assert claims._as_accurate(OverShapes(1.2, 1.0, 1.5, 3)) == claims.CONFIRMED
+    assert claims._as_accurate(OverShapes(1.3, 1.1, 1.8, 3)) == claims.NOT_SEPARABLE
+    assert claims._as_accurate(OverShapes(2.0, 1.6, 2.5, 3)) == claims.REFUTED
+    assert claims._as_accurate(OverShapes(1.2, 1.0, 1.4, 3), p_holm=0.2) == claims.NOT_SEPARABLE
+    assert claims._as_accurate(OverShapes(2.0, 1.6, 2.5, 3), p_holm=0.01) == claims.REFUTED
+    assert claims._as_accurate(OverShapes(1.2, float("nan"), float("nan"), 1)) == claims.NOT_SEPARABLE
