@@ -203,6 +203,20 @@ def test_an_out_of_range_value_is_a_failed_record_naming_it(tmp_path, where, val
     assert rec["status"] == "failed" and rec["error"].startswith(named), rec["error"]
 
 
+def test_the_field_box_must_hold_the_unit_cube_and_checkpoint_every_zero_means_none(tmp_path):
+    """domain is the field box's half side: 0.5 or less cuts the normalized shape (refused, though positive); a
+    checkpoint interval of 0 is allowed (no checkpoints) and a negative one is not. Kills `domain > 0` for
+    `> 0.5` and `checkpoint_every > 0` for `>= 0` in checks.check_numbers."""
+    from ddfbench.run.checks import check_job
+
+    for domain in (0.5, 0.3):
+        with pytest.raises(InputError, match=f"domain={domain}: must be a finite number > 0.5"):
+            check_job({**job(tmp_path), "domain": domain})
+    check_job({**job(tmp_path), "domain": 0.6, "checkpoint_every": 0})
+    with pytest.raises(InputError, match="checkpoint_every=-1: must be a finite number of seconds >= 0"):
+        check_job({**job(tmp_path), "checkpoint_every": -1})
+
+
 @pytest.mark.parametrize("model,section,key", [("mesh", "model", "family"), ("neural_sdf", "sampling", "strategy")])
 def test_a_yaml_that_names_no_module_is_one_line_saying_so(tmp_path, model, section, key):
     cfg = job(tmp_path, f"model={model}")
