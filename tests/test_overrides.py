@@ -97,3 +97,11 @@ def test_values_of_a_key_are_those_its_words_give_in_order():
     assert values_of(args, "experiment") == ["tune"]
     assert values_of(args, "capacity") == ["s", "l=1"]  # `~` deletes: no value; the value keeps its own `=`
     assert values_of(args, "seed") == []
+
+
+def test_a_command_naming_a_model_or_an_experiment_in_any_form_is_not_the_default_run():
+    """Only a command that names no model, no experiment and no flag runs +experiment=default. Kills dropping the
+    plain `experiment=` form from wants_default_experiment (the default experiment would be appended beside it)."""
+    assert cli.wants_default_experiment(["shape=cow", "seed=1"])
+    for named in (["model=ddf"], ["+model=ddf"], ["experiment=sampling"], ["+experiment=sampling"], ["-m"]):
+        assert not cli.wants_default_experiment(["shape=cow", *named]), named
