@@ -105,3 +105,12 @@ def test_a_command_naming_a_model_or_an_experiment_in_any_form_is_not_the_defaul
     assert cli.wants_default_experiment(["shape=cow", "seed=1"])
     for named in (["model=ddf"], ["+model=ddf"], ["experiment=sampling"], ["+experiment=sampling"], ["-m"]):
         assert not cli.wants_default_experiment(["shape=cow", *named]), named
+
+
+def test_threads_empty_or_null_means_every_core_and_a_negative_count_is_refused():
+    """threads= and threads=null are 0 (every core), accepted before Hydra starts; -2 is one line. Kills check_threads
+    refusing the empty value."""
+    for fine in (["threads="], ["threads=null"], ["threads=0"], ["threads=3"], ["threads=1,2"]):
+        cli.check_threads(fine)
+    with pytest.raises(InputError, match=r"^threads=-2: must be an integer >= 0"):
+        cli.check_threads(["threads=-2"])
