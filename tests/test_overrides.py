@@ -114,3 +114,14 @@ def test_threads_empty_or_null_means_every_core_and_a_negative_count_is_refused(
         cli.check_threads(fine)
     with pytest.raises(InputError, match=r"^threads=-2: must be an integer >= 0"):
         cli.check_threads(["threads=-2"])
+
+
+def test_a_nan_given_on_the_command_line_is_left_to_the_value_checks_not_called_replaced_by_a_level(tmp_path):
+    """check_levels_keep compares what was asked with what the job's levels run; a NaN is never equal to itself, so
+    without the NaN rule every NaN override would read as replaced by a level (the value checks name it instead).
+    Kills dropping _both_nan."""
+    from tests.hard_cases.conftest import compose
+
+    cfg = compose("shape=cube", "model=mesh", out_dir=tmp_path)
+    cfg["train"] = {**cfg["train"], "max_seconds": float("nan")}
+    cli.check_levels_keep(cfg, {"model": "mesh"}, ["train.max_seconds=nan"])
