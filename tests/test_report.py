@@ -487,6 +487,17 @@ def test_a_fit_that_never_found_the_shape_is_counted_and_a_row_of_them_is_not_co
     assert set(tables.ranked(df.reset_index())["model"]) == {"gan_near", "mesh_lod500"}
 
 
+def test_intervals_that_touch_overlap_and_an_interval_without_bounds_overlaps_all():
+    """overlaps: closed intervals, so a shared end point is an overlap (a tie, not a bold best); a NaN bound (n < 2)
+    cannot separate. Kills strict < in overlaps, which only the committed-report regeneration caught."""
+    assert stats.overlaps((0.0, 1.0), (1.0, 2.0)) and stats.overlaps((1.0, 2.0), (0.0, 1.0))
+    assert not stats.overlaps((0.0, 1.0), (1.0 + 1e-9, 2.0))
+    assert stats.overlaps((0.0, 1.0), (math.nan, math.nan)) and stats.overlaps((0.0, 1.0), (5.0, math.nan))
+    assert stats.best_and_ties([0.5, 1.5, 3.0], [(0.0, 1.0), (1.0, 2.0), (2.5, 3.5)], "low") == {0: "tie", 1: "tie"}
+    assert stats.best_and_ties([0.5, 1.5], [(0.0, 0.9), (1.0, 2.0)], "low") == {0: "best"}
+    assert stats.best_and_ties([0.5, 1.5], [(0.0, 0.9), (1.0, 2.0)], "high") == {1: "best"}
+
+
 def test_a_row_with_an_empty_run_is_not_ranked_nor_tied_with_the_best():
     """1 empty run of 3 puts the penalty (8.64) in the row's mean and widens its interval past every other: ranked,
     it would tie with the best and take its bold away."""
