@@ -19,7 +19,7 @@ import hydra
 from hydra.core.hydra_config import HydraConfig
 from hydra.experimental.callback import Callback
 from hydra.types import RunMode
-from omegaconf import DictConfig, OmegaConf
+from omegaconf import DictConfig, ListConfig, OmegaConf
 
 from ddfbench.core import plugins
 from ddfbench.core.plugins import CONF_DIR  # plugins registers the `members` resolver the experiments use
@@ -73,6 +73,14 @@ def task(cfg: DictConfig) -> str | float:
     return record["key"]
 
 
+def sweep_direction(value: Any) -> str:
+    """An optimizing sweeper's `direction` as written ("minimize" | "maximize"): Optuna's default is its Direction
+    enum (str() would read "Direction.minimize"), and a list of one direction is a one-objective study."""
+    if isinstance(value, (list, ListConfig)) and len(value) == 1:
+        value = value[0]
+    return str(getattr(value, "name", value))
+
+
 class SweepTableCallback(Callback):
     """Sweep progress lines (ddfbench.run.progress) and, at the end of a sweep, the table of its records; a sweep with
     a failed job exits 1 once every job has run, with one line naming how many failed and the first one's error."""
@@ -85,7 +93,7 @@ class SweepTableCallback(Callback):
         try:
             check_sweep_levels(config)
             if config.get("objective") and config.hydra.sweeper.get("direction") is not None:
-                check_objective(str(config.objective), str(config.hydra.sweeper.direction))
+                check_objective(str(config.objective), sweep_direction(config.hydra.sweeper.direction))
         except InputError as err:
             print(f"ddfbench: {err}", file=sys.stderr)
             sys.exit(1)

@@ -151,3 +151,22 @@ def test_a_study_runs_reports_and_resumes_from_its_records(tmp_path):
     rebuild(str(tmp_path / "report"), str(tmp_path / "rebuilt"), draw=False)  # from trials.csv and study.json alone
     for name in ("trials.csv", "trials.md", "best.md", "space.md"):
         assert (tmp_path / "rebuilt" / name).read_bytes() == (tmp_path / "report" / name).read_bytes(), name
+
+
+def test_the_optuna_sweepers_default_direction_is_read_as_its_name(tmp_path):
+    """Without `direction` in the YAML, Optuna's sweeper holds its Direction enum, whose str() is
+    "Direction.minimize": the check read that as no direction and refused every such study."""
+    from hydra_plugins.hydra_optuna_sweeper.config import Direction
+    from omegaconf import OmegaConf
+
+    from ddfbench.cli import sweep_direction
+
+    assert sweep_direction(Direction.minimize) == "minimize" and sweep_direction("maximize") == "maximize"
+    assert sweep_direction(OmegaConf.create({"d": [Direction.maximize]}).d) == "maximize"
+    done = subprocess.run([sys.executable, "-m", "ddfbench", "-m", "hydra/sweeper=optuna", "model=mesh",
+                           "objective=fscore@0.01", f"out_dir={tmp_path}", f"hydra.sweep.dir={tmp_path}/sweep"],
+                          capture_output=True, text=True, timeout=300)
+    assert done.returncode == 1
+    assert done.stderr.strip().splitlines() == [
+        "ddfbench: objective=fscore@0.01: higher is better, and the study would minimize it "
+        "(hydra.sweeper.direction=minimize)"]
