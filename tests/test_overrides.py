@@ -29,6 +29,12 @@ def test_a_mesh_file_given_as_the_shape_says_how_to_read_a_file(value):
                                      f"shape.path={value}; shape options: ")
 
 
+def test_a_bare_extension_given_as_the_shape_is_no_file():
+    with pytest.raises(InputError) as err:
+        check_overrides(["shape=obj"], sweeps=True)
+    assert "shape=file" not in str(err.value)
+
+
 def test_a_shape_path_without_shape_file_stops_instead_of_running_the_catalog_shape():
     for args in (["shape.path=/data/chair.obj"], ["model=grid_sdf", "+shape.path=/data/chair.obj"],
                  ["+experiment=ablation", "shape.path=/data/chair.obj"]):

@@ -68,7 +68,8 @@ def looks_like_a_file(value: str) -> bool:
     a mesh file's extension."""
     from ddfbench.truth.shapes import MESH_EXTENSIONS
 
-    return "/" in value or os.sep in value or value.rsplit(".", 1)[-1].lower() in MESH_EXTENSIONS
+    ext = value.rsplit(".", 1)[-1].lower() if "." in value else ""  # `shape=obj` names no file
+    return "/" in value or os.sep in value or ext in MESH_EXTENSIONS
 
 
 def other_configs(args: list[str]) -> bool:
