@@ -574,11 +574,11 @@ def render_costs(records: Records) -> list[Claim]:
         out.append(Claim(names[0], sources[0], cold_paper, f"cold / warm frame time of {DDF} {f.fmt(cold)}", f.where(),
                          _side_of_one(cold, above=True) if f.gpu else NOT_TESTABLE,
                          ("" if f.gpu else "The paper's cause is the copy to the GPU; these are CPU records (needs "
-                          "`train.device=cuda`), the CPU ratio is shown for reference. ") + "Cold: the run's first frame, "
-                         "rendered after the fit, mesh extraction and metrics, so with the weights already in memory "
-                         "(on a GPU run, on the device): it holds lazy setup, not the copy to the device the paper "
-                         "names; warm: the median of the repeats after up to one warm-up frame (none where the cold "
-                         "frame spent the time budget); the ratio is each run's."))
+                          "`train.device=cuda`), the CPU ratio is shown for reference. ") + "Cold: the run's first "
+                         "frame, rendered after the fit, mesh extraction and metrics, so with the weights already in "
+                         "memory (on a GPU run, on the device): it holds lazy setup, not the copy to the device the "
+                         "paper names; warm: the median of the repeats after up to one warm-up frame (none where the "
+                         "cold frame spent the time budget); the ratio is each run's."))
     out.append(bvh_growth(records, names[1], sources[1], bvh_paper))
     f = frames(records, (DDF, SDF))
     if f is None:

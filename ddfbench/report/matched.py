@@ -9,7 +9,8 @@ families, the mesh LODs for the mesh family. Per shape and image size, against e
 `ddf_tuned` model) row, a family's matched setting is its fastest (lowest mean warm render time) whose mean
 depth error is at most the reference's and whose mean mask IoU is at least the reference's (depth error is taken on
 pixels both renders hit, so a tracer that loses the silhouette would look accurate by it alone); the default
-setting (no tracer override, full mesh) stands beside it. Speed-up = the setting's warm render time / the reference's (> 1: the DDF renders faster).
+setting (no tracer override, full mesh) stands beside it. Speed-up = the setting's warm render time / the
+reference's (> 1: the DDF renders faster).
 Means over seeds with n; depth error in normalized units (×10³ in the table), warm time in seconds.
 """
 
@@ -95,8 +96,8 @@ def matched_table(records: Iterable[dict[str, Any]], reference: str = REFERENCE)
         for _, ref in part[part["model"] == reference].iterrows():
             others = part[part["family"] != ref["family"]]
             for family, fam in others.groupby("family", sort=False):
-                as_whole = fam["mask_iou_mean"] >= ref["mask_iou_mean"] if ref["mask_iou_mean"] == ref["mask_iou_mean"] \
-                    else True  # a reference without a mask IoU: depth error alone
+                as_whole = (fam["mask_iou_mean"] >= ref["mask_iou_mean"] if pd.notna(ref["mask_iou_mean"])
+                            else True)  # a reference without a mask IoU: depth error alone
                 ok = fam[(fam["depth_mae_mean"] <= ref["depth_mae_mean"]) & as_whole]
                 pick = ok.nsmallest(1, "render_warm_s_mean") if len(ok) else fam.nsmallest(1, "depth_mae_mean")
                 default = fam[fam["default"]].nsmallest(1, "depth_mae_mean")
@@ -120,8 +121,8 @@ def matched_table(records: Iterable[dict[str, Any]], reference: str = REFERENCE)
 def to_markdown(df: pd.DataFrame) -> str:
     """The matched table as markdown, one line per (shape, size, reference, family)."""
     header = ["shape", "size", "DDF depth err ×10³", "DDF mask IoU", "DDF warm s", "family", "default setting",
-              "depth err ×10³", "mask IoU", "warm s", "× DDF time", "matched setting", "depth err ×10³", "mask IoU",
-              "warm s", "× DDF time"]
+              "depth err ×10³", "mask IoU", "warm s", "× DDF time", "matched setting", "depth err ×10³",
+              "mask IoU", "warm s", "× DDF time"]
     rows = []
     for _, r in df.iterrows():
         matched = r["matched_setting"] if r["matched_reached"] else f"{NOT_REACHED} (most accurate: {r['matched_setting']})"

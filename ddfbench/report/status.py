@@ -23,7 +23,7 @@ from typing import Any
 from omegaconf import DictConfig, OmegaConf, open_dict
 
 from ddfbench.core import plugins
-from ddfbench.core.errors import InputError
+from ddfbench.core.errors import InputError, one_line
 from ddfbench.core.plugins import CONF_DIR
 from ddfbench.run import runs
 
@@ -64,8 +64,7 @@ def load_sweep_file(path: str) -> DictConfig:
     try:
         found = OmegaConf.load(path)
     except Exception as exc:  # yaml's parse errors, not UTF-8, unreadable
-        raise InputError(f"{path}: not a readable sweep file ({type(exc).__name__}: "
-                         f"{(str(exc).strip().splitlines() or [''])[0]})") from None
+        raise InputError(f"{path}: not a readable sweep file ({one_line(exc)})") from None
     if not isinstance(found, DictConfig):
         raise InputError(f"{path}: not a readable sweep file (a YAML {type(found).__name__}, not a mapping)")
     return found
