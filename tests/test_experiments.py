@@ -299,14 +299,14 @@ def test_status_refuses_what_the_runner_refuses(capsys):
 def test_status_passes_over_a_sweep_file_that_cannot_be_read(tmp_path, capsys):
     """A multirun.yaml cut short or garbled (a sweep killed or out of disk while Hydra wrote it): `--status` names it
     in one line and takes the sweep before it; named after --status it is one line, exit 2 (both were tracebacks)."""
-    import time
+    import os
 
     from ddfbench.report import status
 
     sweeps = tmp_path / ".hydra" / "sweep"
     (sweeps / "old").mkdir(parents=True)
     (sweeps / "old" / "multirun.yaml").write_text("experiment_name: smoke\n")
-    time.sleep(0.01)
+    os.utime(sweeps / "old" / "multirun.yaml", (1e9, 1e9))  # older whatever the file system's mtime resolution
     (sweeps / "new").mkdir()
     (sweeps / "new" / "multirun.yaml").write_bytes(b"\x00\xff garbage: [")
     assert status.newest_sweep(str(tmp_path / "smoke")) == str(sweeps / "old" / "multirun.yaml")
