@@ -443,7 +443,7 @@ def renders_faster(records: Records) -> list[Claim]:
         backends = sorted({str(((r.get("config") or {}).get("oracle") or {}).get("backend")) for r in f.records
                            if r.get("model") == DDF})  # the reference's caster: oracle.backend, not the mesh model's
         same = (f" (each run against the full mesh's BVH, {'/'.join(backends)}, rendering its scene in its process)"
-                if other == "mesh" else "") + (_all_core_bvh(f.records) if other == "mesh" else "")
+                f"{_all_core_bvh(f.records)}" if other == "mesh" else "")
         # the claim is about rendering on a GPU; records say where they rendered
         out.append(Claim(f"DDF renders faster than {other}", src, paper, f"warm frame time ratio {DDF}/{other} "
                          f"{f.fmt(r)}{same}", f.where(), _side_of_one(r, above=False) if f.gpu else NOT_TESTABLE,
