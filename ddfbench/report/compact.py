@@ -131,9 +131,9 @@ def load_records(source: str, strict: bool = False) -> list[dict[str, Any]]:
 def restore(path: str, out_dir: str) -> tuple[int, int, int]:
     """Write each ok record of the current schema in the compact file at path (what the runner skips) to
     out_dir/<experiment>/<key>/record.json, where that folder holds no record yet (a run of this machine is never
-    replaced); return (written, kept, left out). A failed record or one of another schema (read_compact's line names
-    it) is left out (its run goes again), as is one whose experiment or key is not a plain folder name, with one
-    stderr line naming it."""
+    replaced); return (written, kept, left out). A failed record, one of another schema or a damaged line
+    (read_compact's line names it) is left out (its run goes again), as is one whose experiment or key is not a
+    plain folder name, with one stderr line naming it."""
     from ddfbench.run.checks import SAFE_NAME  # the run folders' rule (checks imports the families: torch)
 
     records, left = _read_compact(path, strict=False)
