@@ -79,6 +79,7 @@ def test_a_ratio_equal_to_the_tested_value_on_every_shape_is_not_rejected():
 
 
 def test_fmt_prints_bounds_only_where_there_are_some():
-    assert ax.fmt(ax.geometric({"a": 1.0, "b": 100.0})) == "10 [1.97e-12, 5.08e+13] (n 2)"  # 10 exp(±12.706 ln 100 / 2)
+    # 10 exp(±12.706 ln 100 / 2)
+    assert ax.fmt(ax.geometric({"a": 1.0, "b": 100.0})) == "10 [1.97e-12, 5.08e+13] (n 2)"
     assert ax.fmt(ax.geometric({"a": 4.0}), scale=1e3) == "4e+03 (n 1)"  # n 1: a centre, no [nan, nan]
     assert ax.fmt(ax.geometric({})) == "–"

@@ -166,7 +166,8 @@ def test_normal_consistency_ignores_orientation():
     Kills dropping either np.abs in matched_normal_consistency (the flipped mesh would score near -1 or 0)."""
     sphere = trimesh.creation.icosphere(4, 0.5)
     flipped = trimesh.Trimesh(sphere.vertices, sphere.faces[:, ::-1], process=False)
-    same = metrics.geometry_metrics(sphere, sphere, 2000, [0.01], seed=0, noise_floor=False, with_point_to_surface=False)
+    same = metrics.geometry_metrics(sphere, sphere, 2000, [0.01], seed=0, noise_floor=False,
+                                    with_point_to_surface=False)
     inside_out = metrics.geometry_metrics(sphere, flipped, 2000, [0.01], seed=0, noise_floor=False,
                                           with_point_to_surface=False)
     assert same["normal_consistency"] > 0.95

@@ -235,7 +235,8 @@ def test_restored_records_resume_a_sweep_on_another_machine(results, tmp_path, c
     assert "schema_version 0, not 1 (a sweep runs it again)" in said.err  # read_compact leaves it out, as reports do
     assert sorted(os.listdir(other / "single")) == sorted(r["key"] for r in ok)  # nothing escaped, no old schema
     assert not (tmp_path / "escaped").exists()
-    assert "3 failed, older, misnamed or damaged, left out" in said.out  # the failed record, the old schema, the escaping key
+    # the failed record, the old schema, the escaping key
+    assert "3 failed, older, misnamed or damaged, left out" in said.out
     assert compact.restore(packed, str(other)) == (0, 2, 3)  # counted, as the message says
     restored = {r["key"]: r for r in compact.load_records(str(other / "single"))}
     seed0 = runner.run(compose("shape=cube", "model=mesh", "seed=0", out_dir=other))
@@ -492,7 +493,8 @@ def test_restoring_a_cut_short_or_garbled_compact_file_is_one_line(results, tmp_
     for path in (cut, garbled):
         assert compact.main(["--restore", str(path), str(tmp_path / "out")]) == 2
         err = capsys.readouterr().err
-        assert err.startswith(f"ddfbench.report.compact: {path}: cannot be read as a compact file (") and err.count("\n") == 1
+        assert err.startswith(f"ddfbench.report.compact: {path}: cannot be read as a compact file (")
+        assert err.count("\n") == 1
     assert not (tmp_path / "out").exists()
 
 
@@ -514,7 +516,8 @@ def test_compact_into_a_folder_that_cannot_be_written_is_one_line(results, tmp_p
     packed = compact.write_compact(compact.load_records(str(results)), str(tmp_path / "r.jsonl.gz"))
     assert compact.main([str(results), str(tmp_path / "none" / "r.jsonl.gz")]) == 2
     err = capsys.readouterr().err
-    assert err == f"ddfbench.report.compact: {tmp_path / 'none' / 'r.jsonl.gz'}: cannot be written (No such file or directory): nothing written\n"
+    assert err == (f"ddfbench.report.compact: {tmp_path / 'none' / 'r.jsonl.gz'}: cannot be written (No such file or "
+                   "directory): nothing written\n")
     real, calls = compact.write_json_atomic, []
 
     def second_fails(path, data):
@@ -566,7 +569,8 @@ def test_the_scratch_folder_a_killed_report_left_is_no_report(tmp_path, capsys):
     assert reports_with_records(str(reports)) == [str(reports / "default")]
     assert index.report_folders(str(reports)) == ["default"]
     assert regenerate_main(["--from-records", "--reports", str(reports), "--readme", str(tmp_path / "none.md")]) == 0
-    assert ".report-" not in (reports / "index.md").read_text() and "rebuilt " + str(scratch) not in capsys.readouterr().out
+    assert ".report-" not in (reports / "index.md").read_text()
+    assert "rebuilt " + str(scratch) not in capsys.readouterr().out
     assert sorted(p.name for p in scratch.iterdir()) == sorted((compact.FILE, "report_options.json", "report.md"))
 
 

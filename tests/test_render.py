@@ -442,7 +442,8 @@ def test_bounce_directions_are_cosine_weighted_about_the_normal():
         assert abs((cos > c).mean() - (1 - c * c)) < 5e-3
     for normal in ([0.0, 0.0, 1.0], [0.0, 0.0, -1.0], [0.6, -0.48, 0.64]):  # no preferred azimuth about any normal
         fixed = np.tile(normal, (40000, 1))
-        tangent = cosine_directions(fixed, rng.random((40000, 2))).astype(np.float64) @ (np.eye(3) - np.outer(normal, normal))
+        drawn = cosine_directions(fixed, rng.random((40000, 2))).astype(np.float64)
+        tangent = drawn @ (np.eye(3) - np.outer(normal, normal))
         assert np.abs(tangent.mean(axis=0)).max() < 0.01
 
 

@@ -15,7 +15,8 @@ def test_a_label_subset_may_take_every_label_the_strategy_gave_but_not_one_more(
     assert whole["status"] == "ok", whole["error"]
     assert whole["sampling"]["n_samples"] == whole["sampling"]["n_generated"] == 2000
     over = runner.run(compose(*FIT, "train.n_labels=2001", out_dir=tmp_path))
-    assert over["status"] == "failed" and over["error"].startswith("train.n_labels=2001: sampling=random gave only 2000")
+    assert over["status"] == "failed"
+    assert over["error"].startswith("train.n_labels=2001: sampling=random gave only 2000")
 
 
 def test_eval_noise_floor_false_leaves_the_floor_out_of_the_record(tmp_path):
