@@ -41,6 +41,10 @@ def test_a_shape_path_without_shape_file_stops_instead_of_running_the_catalog_sh
         with pytest.raises(InputError, match=r"^shape.path=/data/chair.obj: a path is read only with shape=file .*"
                                              r"add shape=file$"):
             check_shape_path(args)
+    for args in (["shape=bunny", "shape.path=/data/chair.obj"], ["-m", "shape.name=cube,torus", "shape.path=/d/c.obj"]):
+        with pytest.raises(InputError, match=r"^shape.path=/d.*: shape=.* is a catalog shape, which ignores a path: "
+                                             r"use shape=file$"):
+            check_shape_path(args)
     for args in (["shape=file", "shape.path=/data/chair.obj"], ["-m", "shape=cube,file", "shape.path=/data/c.obj"],
                  ["shape.name=file", "shape.path=/data/chair.obj"], ["model=mesh"],
                  ["-cd", "/data/myconf", "shape.path=/data/chair.obj"]):

@@ -104,9 +104,17 @@ def check_overrides(args: list[str], sweeps: bool) -> None:
 
 
 def check_shape_path(args: list[str]) -> None:
-    """A `shape.path` on a command line that chooses no shape (no `shape=`, no `shape.name=`): the run's shapes are
-    then catalog shapes (the bunny, or an experiment's), which ignore it, so the file would silently not be read."""
+    """A `shape.path` on a command line whose shapes are catalog shapes, which ignore it, so that the file would
+    silently not be read: no `shape=` or `shape.name=` (the bunny, or an experiment's shapes) or only catalog names
+    (`shape=bunny shape.path=...`; a list that names `file` reads it)."""
     paths = values_of(args, "shape.path")
-    if paths and not values_of(args, "shape") and not values_of(args, "shape.name") and not other_configs(args):
+    chosen = [*values_of(args, "shape"), *values_of(args, "shape.name")]
+    if not paths or other_configs(args) or any("$" in v for v in chosen):
+        return
+    names = {n.strip(" []") for v in chosen for n in v.split(",")}
+    if not chosen:
         raise InputError(f"shape.path={paths[-1]}: a path is read only with shape=file (without it the run's shapes "
                          f"are catalog shapes, which ignore it): add shape=file")
+    if "file" not in names:
+        raise InputError(f"shape.path={paths[-1]}: shape={chosen[-1]} is a catalog shape, which ignores a path: "
+                         f"use shape=file")
