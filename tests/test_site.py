@@ -152,3 +152,20 @@ def test_a_report_whose_compact_file_holds_no_record_adds_no_run(tmp_path):
     compact.write_compact([], str(tmp_path / "reports" / "empty" / compact.FILE))
     df = site.runs(str(tmp_path / "reports"))
     assert set(df["report"]) == {"default"} and len(df) > 0
+
+
+def test_each_configuration_of_a_report_is_a_diamond_of_its_own_as_a_table_row(tmp_path):
+    """A report with one model at several presets (reports/pareto: capacity c1-c4) plots a mean per preset, the
+    runs of the table's row, not one mean pooled over the presets."""
+    shutil.copytree(os.path.join(ROOT, "reports", "pareto"), tmp_path / "reports" / "pareto")
+    df = site.runs(str(tmp_path / "reports"))
+    fig = site.pareto_figure(df, "storage_bytes", "bytes")
+    means = [(t.meta["family"], text) for t in fig.data if t.meta["kind"] == "means" for text in t.text]
+    table = compact.records_of(os.path.join(ROOT, "reports", "pareto"))
+    from ddfbench.report.tables import summarize
+
+    rows = summarize(table)
+    rows = rows[(rows["n"] - rows["n_empty"] - rows["n_off"]) > 0]  # a row with a plotted run
+    assert len(means) == len(rows) > len({m for m, _ in means})
+    tuned = [text for family, text in means if "ddf_tuned (capacity=c2)" in text]
+    assert len(tuned) == 1 and "geometric mean of 3 seed(s)" in tuned[0], means

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import argparse
 import html
+import json
 import math
 import os
 import re
@@ -31,7 +32,7 @@ import pandas as pd
 from ddfbench.core.errors import InputError
 from ddfbench.report import compact, index
 from ddfbench.report.stats import summarize_values
-from ddfbench.report.tables import per_run
+from ddfbench.report.tables import label_keys, per_run, record_row, varying_keys
 
 PALETTE = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2", "#7f7f7f")
 AXES = (("render_warm_s", "warm render s"), ("fit_s", "fit or build s"), ("storage_bytes", "bytes"))
@@ -53,18 +54,31 @@ def runs(reports: str) -> pd.DataFrame:
     below `reports` that holds records.jsonl.gz (column `report`: its folder)."""
     frames = []
     for folder in compact.folders_holding(reports, compact.FILE):
-        df = per_run(compact.records_of(folder))
+        records = compact.records_of(folder)
+        df = per_run(records)
         if df.empty:  # a compact file without a record: no run to plot
             continue
         df.insert(0, "report", os.path.relpath(folder, reports))
+        # the table's configuration (tables.summarize: the config keys that vary in the report) and its label (the
+        # varying override keys, e.g. capacity=c2): a report's presets of one model are rows of their own
+        rows = [record_row(r) for r in records]
+        keys, labels = varying_keys(rows), label_keys(rows)
+        df["config"] = ["|".join(json.dumps(r["_config"].get(k), default=str) for k in keys) for r in rows]
+        df["preset"] = [", ".join(f"{k}={r['_labels'].get(k)}" for k in labels) for r in rows]
         # a run that gave no mesh, or one off the shape, is not a method result: its penalty is not plotted
         frames.append(df[(df["status"] == "ok") & ~df["empty"].astype(bool) & ~df["off"].astype(bool)])
     return pd.concat(frames, ignore_index=True) if frames else pd.DataFrame()
 
 
+def _named(model: str, preset: str) -> str:
+    """A model with its preset label where the report varies one (`ddf_tuned (capacity=c2)`)."""
+    return f"{model} ({preset})" if preset else model
+
+
 def pareto_figure(df: pd.DataFrame, x: str, x_label: str):
     """The figure of CD-L2 x10^3 against column x: per family and shape one trace of runs (legend group = family)
-    and one of (report, model) geometric means with interval bars; a dropdown shows one shape or all."""
+    and one of (report, model, configuration) geometric means with interval bars, as the table's rows; a dropdown
+    shows one shape or all."""
     import plotly.graph_objects as go
 
     data = df[np.isfinite(df[x].astype(float)) & np.isfinite(df["chamfer_l2"].astype(float))
@@ -75,21 +89,23 @@ def pareto_figure(df: pd.DataFrame, x: str, x_label: str):
     trace_shapes: list[str] = []
     for family, fam in data.groupby("family", sort=True):
         for shape, part in fam.groupby("shape", sort=True):
-            hover = [f"{r.report}: {r.family} / {r.model}<br>shape {r.shape}, seed {r.seed}" for r in part.itertuples()]
+            hover = [f"{r.report}: {r.family} / {_named(r.model, r.preset)}<br>shape {r.shape}, seed {r.seed}"
+                     for r in part.itertuples()]
             fig.add_trace(go.Scatter(x=part[x], y=1e3 * part["chamfer_l2"], mode="markers", name=family,
                                      legendgroup=family, showlegend=shape == fam["shape"].min(), text=hover,
                                      hoverinfo="text+x+y", marker={"size": 7, "opacity": 0.55, "color": colors[family]},
                                      meta={"kind": "runs", "family": family, "shape": shape}))
             trace_shapes.append(shape)
             means = []
-            for (model, report), cell in part.groupby(["model", "report"], sort=True):
+            for (model, report, _), cell in part.groupby(["model", "report", "config"], sort=True):
                 # geometric mean over seeds and the exponentiated t interval of the mean log: bars stay above 0 on
                 # the log axis; one seed: no bar
                 s = summarize_values(np.log(1e3 * cell["chamfer_l2"].astype(float)))
                 center = math.exp(s.mean)
                 up, down = ((math.exp(s.hi) - center, center - math.exp(s.lo)) if s.n > 1 else (math.nan, math.nan))
                 means.append((cell[x].astype(float).mean(), center, up, down,
-                              f"{report}: {family} / {model}, {shape}: geometric mean of {s.n} seed(s)"
+                              f"{report}: {family} / {_named(model, cell['preset'].iloc[0])}, {shape}: "
+                              f"geometric mean of {s.n} seed(s)"
                               + (", 95 % t interval of the mean log" if s.n > 1 else ", no interval")))
             mx, my, up, down, mt = zip(*means)
             fig.add_trace(go.Scatter(x=mx, y=my, mode="markers", name=family, legendgroup=family, showlegend=False,
