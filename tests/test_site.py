@@ -169,3 +169,14 @@ def test_each_configuration_of_a_report_is_a_diamond_of_its_own_as_a_table_row(t
     assert len(means) == len(rows) > len({m for m, _ in means})
     tuned = [text for family, text in means if "ddf_tuned (capacity=c2)" in text]
     assert len(tuned) == 1 and "geometric mean of 3 seed(s)" in tuned[0], means
+
+
+def test_a_mean_says_how_many_of_its_runs_it_leaves_out(tmp_path):
+    """gan_no_adv's gan_sdf on the bunny: 3 ok runs, 1 off the shape. The table's row counts it (its CD-L2 mean is
+    the 3 runs'); the plotted mean is of the other 2 and says so."""
+    shutil.copytree(os.path.join(ROOT, "reports", "gan_no_adv"), tmp_path / "reports" / "gan_no_adv")
+    fig = site.pareto_figure(site.runs(str(tmp_path / "reports")), "storage_bytes", "bytes")
+    texts = {t.meta["family"]: list(t.text) for t in fig.data if t.meta["kind"] == "means"}
+    [gan] = [text for family, found in texts.items() for text in found if "/ gan_sdf," in text]
+    assert "geometric mean of 2 seed(s)" in gan and "1 of its 3 runs left out (no mesh or off the shape)" in gan
+    assert all("left out" not in text for found in texts.values() for text in found if text != gan)

@@ -65,14 +65,25 @@ def runs(reports: str) -> pd.DataFrame:
         keys, labels = varying_keys(rows), label_keys(rows)
         df["config"] = ["|".join(json.dumps(r["_config"].get(k), default=str) for k in keys) for r in rows]
         df["preset"] = [", ".join(f"{k}={r['_labels'].get(k)}" for k in labels) for r in rows]
-        # a run that gave no mesh, or one off the shape, is not a method result: its penalty is not plotted
-        frames.append(df[(df["status"] == "ok") & ~df["empty"].astype(bool) & ~df["off"].astype(bool)])
+        # a run that gave no mesh, or one off the shape, is not a method result: its penalty is not plotted; the
+        # mean of its configuration says how many of its ok runs (the table's n) it leaves out
+        ok = df[df["status"] == "ok"].copy()
+        ok["lost"] = ok["empty"].astype(bool) | ok["off"].astype(bool)
+        cell = ok.groupby(["model", "shape", "config"], dropna=False)["lost"]
+        ok["n_ok"], ok["n_left_out"] = cell.transform("size"), cell.transform("sum")
+        frames.append(ok[~ok["lost"]].drop(columns="lost"))
     return pd.concat(frames, ignore_index=True) if frames else pd.DataFrame()
 
 
 def _named(model: str, preset: str) -> str:
     """A model with its preset label where the report varies one (`ddf_tuned (capacity=c2)`)."""
     return f"{model} ({preset})" if preset else model
+
+
+def _left_out(cell: pd.DataFrame) -> str:
+    """The runs of a configuration its mean leaves out, in words ('' for none): the table's mean counts them."""
+    lost, n = int(cell["n_left_out"].iloc[0]), int(cell["n_ok"].iloc[0])
+    return f"<br>{lost} of its {n} runs left out (no mesh or off the shape): the table's mean counts them" * bool(lost)
 
 
 def pareto_figure(df: pd.DataFrame, x: str, x_label: str):
@@ -106,7 +117,8 @@ def pareto_figure(df: pd.DataFrame, x: str, x_label: str):
                 means.append((cell[x].astype(float).mean(), center, up, down,
                               f"{report}: {family} / {_named(model, cell['preset'].iloc[0])}, {shape}: "
                               f"geometric mean of {s.n} seed(s)"
-                              + (", 95 % t interval of the mean log" if s.n > 1 else ", no interval")))
+                              + (", 95 % t interval of the mean log" if s.n > 1 else ", no interval")
+                              + _left_out(cell)))
             mx, my, up, down, mt = zip(*means)
             fig.add_trace(go.Scatter(x=mx, y=my, mode="markers", name=family, legendgroup=family, showlegend=False,
                                      error_y={"type": "data", "array": list(up), "arrayminus": list(down),
