@@ -180,3 +180,17 @@ def test_a_mean_says_how_many_of_its_runs_it_leaves_out(tmp_path):
     [gan] = [text for family, found in texts.items() for text in found if "/ gan_sdf," in text]
     assert "geometric mean of 2 seed(s)" in gan and "1 of its 3 runs left out (no mesh or off the shape)" in gan
     assert all("left out" not in text for found in texts.values() for text in found if text != gan)
+
+
+def test_a_not_converged_row_shows_no_penalty_on_its_report_page(tmp_path):
+    """reports/pareto's ddf_paper rows: every run empty, so table.md shows their geometry cells blank and the row
+    unranked; the page shows them blank too (table.csv keeps the penalty, CD-L2 8.64), with a note."""
+    shutil.copytree(os.path.join(ROOT, "reports", "pareto"), tmp_path / "reports" / "pareto",
+                    ignore=shutil.ignore_patterns("edge_error", "zero_level"))
+    (tmp_path / "site" / "img").mkdir(parents=True)
+    site.write_reports(str(tmp_path / "reports"), str(tmp_path / "site"))
+    page = (tmp_path / "site" / "report-pareto.html").read_text()
+    rows = [r for r in page.split("<tr>") if "<td>ddf_paper</td>" in r]
+    assert len(rows) == 4 and all("<td>8.64</td>" not in r and "<td>True</td>" in r for r in rows)
+    assert "<td>8.64</td>" not in page and "not_converged (every run empty or off the shape)" in page
+    assert "<td>2.919</td>" in page  # a row with one empty run of three keeps its mean, as table.md does

@@ -30,6 +30,7 @@ import numpy as np
 import pandas as pd
 
 from ddfbench.core.errors import InputError
+from ddfbench.evaluate.metric_registry import by_name
 from ddfbench.report import compact, index
 from ddfbench.report.stats import summarize_values
 from ddfbench.report.tables import label_keys, per_run, record_row, varying_keys
@@ -204,6 +205,18 @@ def provenance_line(found: index.Provenance) -> str:
             f"{', '.join(found.commits) or 'unknown'}; {where}")
 
 
+def blank_not_converged(table: pd.DataFrame) -> pd.DataFrame:
+    """table.csv with the penalised metrics of its not_converged rows blank (NaN), as tables.to_markdown shows them:
+    a penalty is not a method result."""
+    if "not_converged" not in table:
+        return table
+    dead, table = table["not_converged"].astype(bool), table.copy()
+    for name, metric in by_name().items():
+        if metric.penalty is not None:
+            table.loc[dead, [c for c in table.columns if c.startswith(f"{name}_")]] = math.nan
+    return table
+
+
 def write_reports(reports: str, out: str) -> list[tuple[str, str, index.Provenance]]:
     """One page per report folder: its provenance, its table.csv and its images (copied under img/). Returns
     (page name, folder relative to reports, provenance) per page."""
@@ -216,9 +229,12 @@ def write_reports(reports: str, out: str) -> list[tuple[str, str, index.Provenan
             target = os.path.join("img", f"{slug}-{name}")
             shutil.copy2(os.path.join(folder, name), os.path.join(out, target))
             images.append(f"<p><img src='{target}' alt='{html.escape(rel)} {name}'></p>")
-        table = pd.read_csv(os.path.join(folder, "table.csv"))
+        table = blank_not_converged(pd.read_csv(os.path.join(folder, "table.csv")))
         shown = [c for c in table.columns if not c.endswith(("_ci_lo", "_ci_hi", "_std")) and c != "keys"]
-        body = (f"<p>From <code>reports/{html.escape(rel)}</code>: {provenance_line(found)}.</p>"
+        note = (" A row not_converged (every run empty or off the shape) is no method result and is not ranked: its "
+                "geometry cells are blank, as in the report's table.md (table.csv keeps the penalty)."
+                if "not_converged" in table and table["not_converged"].astype(bool).any() else "")
+        body = (f"<p>From <code>reports/{html.escape(rel)}</code>: {provenance_line(found)}.{note}</p>"
                 + table[shown].to_html(index=False, float_format=lambda v: f"{v:.4g}", na_rep="–") + "".join(images))
         with open(os.path.join(out, f"{slug}.html"), "w") as fh:
             fh.write(page(rel, body))
