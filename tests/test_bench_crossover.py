@@ -49,13 +49,21 @@ def test_depth_error_counts_only_rays_both_hit():
 
 def test_a_small_run_gives_a_row_per_count_model_and_ray_set(tmp_path):
     sizes = SIZES["small"]["crossover"]
-    res = run(Context("cpu", sizes, repeats=1, warmup=0, workdir=str(tmp_path), threads=1))
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)  # as the bench's --threads 1 sets it
+    try:
+        res = run(Context("cpu", sizes, repeats=1, warmup=0, workdir=str(tmp_path), threads=1))
+    finally:
+        torch.set_num_threads(threads)
     counts = res.details["counts"]
     assert len(counts) == len(sizes["counts"]) and counts == sorted(counts)
     assert len(res.rows) == len(counts) * len(sizes["models"]) * 2
     assert all(r.ratio > 0 and math.isfinite(r.ratio) for r in res.rows)
     for kind in ("primary", "incoherent"):
         entries = res.details[kind]
+        # open3d's BVH casts on every core, the DDF on torch's threads: each figure names its own
+        assert all(e["bvh"]["threads"] == os.cpu_count() for e in entries)
+        assert all(e[name]["threads"] == 1 for e in entries for name in sizes["models"])
         subdivided = [e for e in entries if e["faces"] > res.details["shape_faces"]]
         assert subdivided and all(e["depth_mae"] < 1e-5 and e["hit_flip_share"] < 0.01 for e in subdivided)
         for name in sizes["models"]:
