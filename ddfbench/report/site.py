@@ -4,9 +4,9 @@ The site opens from the file system with no server (plotly.js is written once be
 
     index.html        what the site holds, links to every page
     pareto.html       accuracy (CD-L2) against warm render time, fit time and bytes, one point per run of every
-                      report with compact records (records.jsonl.gz); log axes; per (model, shape) the mean with its
-                      95 % t interval as error bars; hover names experiment, family, preset, shape and seed; a legend
-                      entry per family toggles its points; a shape selector
+                      report with compact records (records.jsonl.gz); log axes; per table row (report, model,
+                      preset, shape) the geometric mean with its 95 % t interval as error bars; hover names report,
+                      family, preset, shape and seed; a legend entry per family toggles its points; a shape selector
     claims.html       reports/claims.md as a table, filterable by verdict
     gallery.html      every committed gallery.png
     <report>.html     one page per report folder with a table.csv: its runs, code commit and whether it regenerates
