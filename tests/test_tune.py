@@ -94,10 +94,11 @@ def test_an_objective_whose_better_end_the_study_runs_from_is_refused():
         objective_value({"status": "ok", "fit": {"steps": 3}}, "steps")
 
 
-def test_the_tune_sweep_refuses_a_wrong_way_objective_before_any_job(tmp_path):
-    done = subprocess.run([sys.executable, "-m", "ddfbench", "+experiment=tune", "model=neural_sdf",
-                           "objective=fscore@0.01", f"out_dir={tmp_path}", f"hydra.sweep.dir={tmp_path}/sweep"],
-                          capture_output=True, text=True, timeout=300)
+@pytest.mark.parametrize("study", (["+experiment=tune", "model=neural_sdf"],  # direction: minimize in its YAML
+                                   ["-m", "hydra/sweeper=optuna", "model=mesh"]))  # Optuna's default, an enum
+def test_a_study_refuses_a_wrong_way_objective_before_any_job(tmp_path, study):
+    done = subprocess.run([sys.executable, "-m", "ddfbench", *study, "objective=fscore@0.01", f"out_dir={tmp_path}",
+                           f"hydra.sweep.dir={tmp_path}/sweep"], capture_output=True, text=True, timeout=300)
     assert done.returncode == 1
     assert done.stderr.strip().splitlines() == [
         "ddfbench: objective=fscore@0.01: higher is better, and the study would minimize it "
@@ -153,7 +154,7 @@ def test_a_study_runs_reports_and_resumes_from_its_records(tmp_path):
         assert (tmp_path / "rebuilt" / name).read_bytes() == (tmp_path / "report" / name).read_bytes(), name
 
 
-def test_the_optuna_sweepers_default_direction_is_read_as_its_name(tmp_path):
+def test_the_optuna_sweepers_default_direction_is_read_as_its_name():
     """Without `direction` in the YAML, Optuna's sweeper holds its Direction enum, whose str() is
     "Direction.minimize": the check read that as no direction and refused every such study."""
     from hydra_plugins.hydra_optuna_sweeper.config import Direction
@@ -163,10 +164,3 @@ def test_the_optuna_sweepers_default_direction_is_read_as_its_name(tmp_path):
 
     assert sweep_direction(Direction.minimize) == "minimize" and sweep_direction("maximize") == "maximize"
     assert sweep_direction(OmegaConf.create({"d": [Direction.maximize]}).d) == "maximize"
-    done = subprocess.run([sys.executable, "-m", "ddfbench", "-m", "hydra/sweeper=optuna", "model=mesh",
-                           "objective=fscore@0.01", f"out_dir={tmp_path}", f"hydra.sweep.dir={tmp_path}/sweep"],
-                          capture_output=True, text=True, timeout=300)
-    assert done.returncode == 1
-    assert done.stderr.strip().splitlines() == [
-        "ddfbench: objective=fscore@0.01: higher is better, and the study would minimize it "
-        "(hydra.sweeper.direction=minimize)"]
