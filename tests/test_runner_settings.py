@@ -1,5 +1,5 @@
-"""Runner settings that change what a record holds: the label subset's bounds, eval.noise_floor and the probes. In process
-(runner.run), on the cube with small fits."""
+"""Runner settings that change what a record holds: the label subset's bounds, eval.noise_floor and the probes. In
+process (runner.run), on the cube with small fits."""
 
 from ddfbench.run import runner
 from tests.hard_cases.conftest import compose
