@@ -30,6 +30,8 @@ def test_a_network_is_made_once_and_loaded_back_equal(tmp_path):
     rep, info = prepared.artifact(sizes, "nsdf", spec, NeuralSDF, _make(calls))
     again, info2 = prepared.artifact(sizes, "nsdf", spec, NeuralSDF, _make(calls))
     assert len(calls) == 1 and info2["fit_steps"] == 7 and info2["prepared"].startswith("nsdf-")
+    # the process that made it names it as a later one that loads it does (bench.repeats pools only the same names)
+    assert info["prepared"] == info2["prepared"] and info["fit_steps"] == 7
     x = torch.rand(64, 3) - 0.5
     with torch.no_grad():
         assert torch.equal(rep.field(x), again.field(x))

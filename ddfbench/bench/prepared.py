@@ -43,7 +43,8 @@ def _folder(sizes: dict) -> str | None:
 def artifact(sizes: dict, name: str, spec: dict[str, Any], family: type[R],
              make: Callable[[], tuple[R, dict]]) -> tuple[R, dict]:
     """(rep, info): loaded from sizes' `prepared` folder when an artifact of `name` made by `spec` is there
-    (info as saved, with "prepared": its path), else make() -> (rep, info), saved there when the key is set.
+    (info as saved, with "prepared": its file's name), else make() -> (rep, info), saved there when the key is set
+    (info then names the file it was saved as, the same "prepared").
     family: the Representation class whose load reads the file."""
     folder = _folder(sizes)
     if folder is None:
@@ -60,7 +61,9 @@ def artifact(sizes: dict, name: str, spec: dict[str, Any], family: type[R],
     rep, info = make()
     path = rep.save(stem)
     _write_json(f"{stem}.json", {"path": os.path.basename(path), "spec": spec, "info": info})
-    return rep, info
+    # named as a later process that loads it names it: the process that made it raced the same network, and
+    # bench.repeats pools runs only where every run names the same one
+    return rep, {**info, "prepared": os.path.basename(stem)}
 
 
 def mesh(sizes: dict, name: str, spec: dict[str, Any], make: Callable[[], trimesh.Trimesh]) -> trimesh.Trimesh:
