@@ -190,6 +190,21 @@ def test_run_adds_the_overrides_after_the_double_dash_to_every_experiment_and_wr
     assert [c[3] for c in reports][:2] == [os.path.join("out", "default"), os.path.join("out", "representations")]
 
 
+def test_the_report_reads_the_records_folder_an_experiment_name_override_names(monkeypatch, tmp_path):
+    """The gpu tier's convergence run named apart from the long tier's (its records would otherwise pool with the
+    CPU's in one results folder): the report is written from the folder the runs wrote."""
+    commands = []
+
+    class Done:
+        returncode = 0
+
+    monkeypatch.setattr(suite.subprocess, "run", lambda cmd, **_: commands.append(cmd) or Done())
+    assert suite.main(["run", "v1", "--tier", "gpu", "--results", str(tmp_path), "--",
+                       "experiment_name=convergence_gpu_try"]) == 0
+    (report,) = [c for c in commands if c[2] == "ddfbench.report"]
+    assert report[3] == str(tmp_path / "convergence_gpu_try")
+
+
 def test_a_sweep_with_failed_jobs_keeps_the_committed_report_and_writes_its_own_beside_the_records(
         monkeypatch, tmp_path, capsys):
     commands = []

@@ -321,8 +321,7 @@ def run(suite: str, tier: str, results: str, extra: list[str] | None = None, fro
         swept = subprocess.run(cmd).returncode
         swept = swept if swept >= 0 else 1  # a sweep killed by a signal has a negative code
         rc = max(rc, swept)
-        records_dir = os.path.join(results, str(OmegaConf.load(os.path.join(
-            CONF_DIR, "experiment", f"{entry.experiment}.yaml")).get("experiment_name") or entry.experiment))
+        records_dir = os.path.join(results, experiment_name(entry, extra))
         follow_up = FOLLOW_UPS.get(entry.experiment)
         sweeps = []
         if follow_up and os.path.isdir(records_dir):
@@ -338,6 +337,16 @@ def run(suite: str, tier: str, results: str, extra: list[str] | None = None, fro
             swept = max(swept, code if code >= 0 else 1)
         rc = max(rc, swept, write_report(entry, records_dir, swept))  # once its follow-ups have run: they read records
     return rc
+
+
+def experiment_name(entry: Entry, extra: list[str] | None = None) -> str:
+    """The records folder's name under out_dir that the entry's command line writes: the last experiment_name=
+    of its overrides and then extra (Hydra takes the last), else its experiment YAML's, else the experiment."""
+    named = [o.split("=", 1)[1] for o in [*entry.overrides, *(extra or [])] if o.startswith("experiment_name=")]
+    if named:
+        return named[-1]
+    return str(OmegaConf.load(os.path.join(CONF_DIR, "experiment", f"{entry.experiment}.yaml")).get("experiment_name")
+               or entry.experiment)
 
 
 def shell_line(cmd: list[str]) -> str:
