@@ -276,7 +276,6 @@ def check_plain_keys(args: list[str]) -> None:
             continue
         if not eq or arg.startswith(("+", "~", "-")) or "/" in path or path.startswith("hydra."):
             continue
-        section, _, key = path.partition(".")
         if not key and section not in (*known[""], "suite") and os.path.isdir(os.path.join(CONF_DIR, section)):
             raise InputError(f"{arg}: {section} is a config group outside the defaults: use +{arg}")
         if not key:

@@ -329,8 +329,8 @@ def accurate_as_sdf_over_shapes(records: Records) -> list[Claim]:
                   "gave a result",
                   verdict, f"Inference over shapes (ddfbench/report/across_shapes.py): geometric mean of per-shape "
                   f"ratios, t interval of the mean log ratio; p values Holm-corrected across the suite's family "
-                  f"ratios (one family of claims). {AS_ACCURATE_RULE} Either verdict also needs the Holm p of the t test "
-                  f"of the ratio against {EQUIVALENCE:g} (this row's member of that family) below 0.05.")]
+                  f"ratios (one family of claims). {AS_ACCURATE_RULE} Either verdict also needs the Holm p of the t "
+                  f"test of the ratio against {EQUIVALENCE:g} (this row's member of that family) below 0.05.")]
 
 
 RENDER_EXPERIMENTS = ("render_shapes", "render_time")  # frame costs over the evaluation shapes, else the bunny's seeds

@@ -82,8 +82,7 @@ def regenerate(experiment: str, results: str, reports: str, overrides: list[str]
             write_report_whole(os.path.join(results, experiment), out, note=note,
                                sweep=[f"+experiment={experiment}", *overrides])
         except (MixedCommits, InputError, OSError) as exc:  # resumed across a code change, a sweep that left no record
-            print(f"{experiment}: no report: {exc if not isinstance(exc, OSError) else one_line(exc)}", file=sys.stderr,
-                  flush=True)
+            print(f"{experiment}: no report: {_said(exc)}", file=sys.stderr, flush=True)
             return 2
     if seconds is not None:
         with open(os.path.join(out, "wall_time.txt"), "w") as fh:
@@ -93,6 +92,11 @@ def regenerate(experiment: str, results: str, reports: str, overrides: list[str]
 
 
 COMPARED = (".md", ".csv", ".tex")  # what --check compares byte for byte
+
+
+def _said(exc: Exception) -> str:
+    """An error as one line: an OSError's (errno text and file), else its own message (InputError's is one line)."""
+    return one_line(exc) if isinstance(exc, OSError) else str(exc)
 
 
 def reports_with_records(reports: str) -> list[str]:
@@ -170,7 +174,7 @@ def from_records(reports: str, check: bool, readme: str | None = None) -> int:
                 differing += [os.path.join(folder, name) for name in differences(folder, scratch, whole=rows)]
         except (InputError, MixedCommits, OSError) as exc:  # a damaged input, a full or read-only disk: the folder
             unreadable += 1                                     # stays as it was
-            message = f"{folder}: not rebuilt ({one_line(exc)})" if isinstance(exc, OSError) else str(exc)
+            message = f"{folder}: not rebuilt ({_said(exc)})" if isinstance(exc, OSError) else _said(exc)
             print(f"ddfbench.report.regenerate: {message}", file=sys.stderr, flush=True)
     generated = {"claims.md": lambda path: write_committed_claims(reports, path),  # the files made from all reports
                  index.FILE: lambda path: index.write_index(reports, path)}
@@ -187,8 +191,7 @@ def from_records(reports: str, check: bool, readme: str | None = None) -> int:
                         differing.append(path)
         except (InputError, OSError) as exc:
             unreadable += 1
-            message = one_line(exc) if isinstance(exc, OSError) else str(exc)
-            print(f"ddfbench.report.regenerate: {path} not rebuilt: {message}", file=sys.stderr, flush=True)
+            print(f"ddfbench.report.regenerate: {path} not rebuilt: {_said(exc)}", file=sys.stderr, flush=True)
     for path in differing:
         print(f"ddfbench.report.regenerate: {path} differs from its rebuild from its records", file=sys.stderr)
     if check:

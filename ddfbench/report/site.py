@@ -33,7 +33,7 @@ from ddfbench.core.errors import InputError
 from ddfbench.evaluate.metric_registry import by_name
 from ddfbench.report import compact, index
 from ddfbench.report.stats import summarize_values
-from ddfbench.report.tables import label_keys, per_run, record_row, varying_keys
+from ddfbench.report.tables import label_keys, per_run_of_rows, record_row, varying_keys
 
 PALETTE = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2", "#7f7f7f")
 AXES = (("render_warm_s", "warm render s"), ("fit_s", "fit or build s"), ("storage_bytes", "bytes"))
@@ -55,14 +55,13 @@ def runs(reports: str) -> pd.DataFrame:
     below `reports` that holds records.jsonl.gz (column `report`: its folder)."""
     frames = []
     for folder in compact.folders_holding(reports, compact.FILE):
-        records = compact.records_of(folder)
-        df = per_run(records)
+        rows = [record_row(r) for r in compact.records_of(folder)]
+        df = per_run_of_rows(rows)
         if df.empty:  # a compact file without a record: no run to plot
             continue
         df.insert(0, "report", os.path.relpath(folder, reports))
         # the table's configuration (tables.summarize: the config keys that vary in the report) and its label (the
         # varying override keys, e.g. capacity=c2): a report's presets of one model are rows of their own
-        rows = [record_row(r) for r in records]
         keys, labels = varying_keys(rows), label_keys(rows)
         df["config"] = ["|".join(json.dumps(r["_config"].get(k), default=str) for k in keys) for r in rows]
         df["preset"] = [", ".join(f"{k}={r['_labels'].get(k)}" for k in labels) for r in rows]

@@ -110,7 +110,11 @@ def label_keys(rows: list[dict[str, Any]]) -> list[str]:
 def per_run(records: Iterable[dict[str, Any]]) -> pd.DataFrame:
     """One row per record: record_row's columns, with each varying override key (e.g. `capacity`) after
     `shape`, so a run can be told apart from the other runs of its configuration."""
-    rows = [record_row(r) for r in records]
+    return per_run_of_rows([record_row(r) for r in records])
+
+
+def per_run_of_rows(rows: list[dict[str, Any]]) -> pd.DataFrame:
+    """per_run of records already made rows by record_row."""
     labels = label_keys(rows) if rows else []
     out = []
     for r in rows:

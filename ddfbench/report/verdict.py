@@ -124,8 +124,8 @@ def rows(short: list[Record], full: list[Record], frames: list[Record] = (),
             if failed:
                 steps = sorted({(r.get("fit") or {}).get("steps") for r in mine})
                 how = "failed" if not mine else NOT_CONVERGED if failed == len(runs) else "no result, not ranked"
-                out.append([model, budget, f"{how} ({failed} of {len(runs)} runs" + (f", steps {steps})" if steps else ")")]
-                           + ["–"] * (len(HEADER) - 3))
+                said = f"{how} ({failed} of {len(runs)} runs" + (f", steps {steps})" if steps else ")")
+                out.append([model, budget, said] + ["–"] * (len(HEADER) - 3))
                 continue
             suite = "–"
             if model in over:

@@ -123,8 +123,8 @@ def to_markdown(rows: list[dict[str, Any]]) -> str:
                       f"{r['chamfer_l2_at_level'] * 1e3:.4g}{flags}",
                       f"{r.get('fscore@0.01_at_0', math.nan):.3g} → {r.get('fscore@0.01_at_level', math.nan):.3g}"])
     lines = pipe_lines(["model", "shape", "capacity", "seed", "offset ×10³ p5 / p25 / p50 / p75 / p95",
-                        "mean abs offset ×10³", "median slope", "level ×10³", "CD-L2 ×10³ record / at 0 / at level",
-                        "F@0.01 at 0 → at level"], cells)
+                        "mean abs offset ×10³", "median slope", "level ×10³",
+                        "CD-L2 ×10³ record / at 0 / at level", "F@0.01 at 0 → at level"], cells)
     lines += ["", "offset: the field's value at a point sampled on the GT surface over its gradient's norm there, a "
               "first-order signed distance to the learned zero level (> 0: the learned surface lies inside the true "
               "one). level: the median field value on the GT surface. 'record' is the run's own result; 'at 0' the "
