@@ -503,3 +503,23 @@ def test_jittered_samples_spread_over_the_whole_pixel_about_its_centre():
     off_x, off_y = px[1:] - px[0], py[1:] - py[0]
     assert abs(off_x.mean()) < 0.02 and abs(off_y.mean()) < 0.02
     assert 0.45 < np.abs(off_x).max() <= 0.5 + 1e-4 and 0.45 < np.abs(off_y).max() <= 0.5 + 1e-4
+def test_the_mesh_bvh_casts_on_the_threads_a_render_records():
+    """render_threads (compute_threads) is recorded beside the mesh's and the reference's frame times; open3d's
+    cast_rays defaults to every core, so the BVH must be told the count or its figure is not what is recorded."""
+    torch = pytest.importorskip("torch")
+    rep = mesh_rep(trimesh.creation.icosphere(3, 0.4))
+    real, seen = rep._oracle._scene, []
+
+    class Spy:
+        def cast_rays(self, rays, nthreads=0):
+            seen.append(nthreads)
+            return real.cast_rays(rays, nthreads=nthreads)
+
+    rep._oracle._o3d_scene = Spy()
+    saved = torch.get_num_threads()
+    try:
+        torch.set_num_threads(1)
+        hits = rep.intersect(np.array([[0.0, 0.0, 2.0]]), np.array([[0.0, 0.0, -1.0]]))
+    finally:
+        torch.set_num_threads(saved)
+    assert hits.hit[0] and seen and all(n == 1 for n in seen)

@@ -13,6 +13,7 @@ import numpy as np
 import trimesh
 
 from ddfbench.core.atomic import write_atomic
+from ddfbench.core.clock import compute_threads
 from ddfbench.core.errors import InputError
 from ddfbench.core.geometry import BOX_HALF
 from ddfbench.core.representation import Budget, FitData, FitStats, Hits, Probe, RayStatus, Representation
@@ -71,10 +72,12 @@ class MeshFamily(Representation):
     def intersect(self, origins: np.ndarray, directions: np.ndarray, normals: bool = True) -> Hits:
         """First hit from the oracle's ray caster (cfg.backend: open3d, embree or warp), never the surface a ray
         starts on: a hit closer than T_MIN is cast again
-        from T_MIN further along (up to 3 times, doubling T_MIN, for starts that graze a facet)."""
+        from T_MIN further along (up to 3 times, doubling T_MIN, for starts that graze a facet). open3d casts on
+        core.clock.compute_threads() threads (torch's, what a render record states), not on every core."""
         origins = np.asarray(origins, np.float64).reshape(-1, 3)
         directions = np.asarray(directions, np.float64).reshape(-1, 3)
-        t, tri, normal = self._oracle.first_hit(origins, directions)
+        threads = compute_threads()  # open3d: the threads a render records (render_threads), not every core
+        t, tri, normal = self._oracle.first_hit(origins, directions, threads)
         skipped = np.zeros(len(t), np.float64)
         t_min = T_MIN
         for _ in range(3):
@@ -83,7 +86,7 @@ class MeshFamily(Representation):
                 break
             skipped[again] += t_min
             t2, tri2, n2 = self._oracle.first_hit(origins[again] + skipped[again, None] * directions[again],
-                                                  directions[again])
+                                                  directions[again], threads)
             t[again], tri[again], normal[again] = t2, tri2, n2
             t_min *= 2
         t = np.where(tri >= 0, t + skipped, np.inf).astype(np.float32)

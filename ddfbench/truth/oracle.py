@@ -127,14 +127,16 @@ class Oracle:
         return self._o3d_scene
 
     # ---- rays -------------------------------------------------------------------------------
-    def first_hit(self, origins: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def first_hit(self, origins: np.ndarray, directions: np.ndarray,
+                  threads: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """First hit of rays (N,3),(N,3) (directions made unit: t is a distance).
 
         Returns t (N,) float32 (inf on a miss), triangle id (N,) int64 (-1 on a miss) and the
         geometric face normal (N,3) float32 oriented against the ray (zeros on a miss).
+        threads: open3d's casting threads (0: every core); the embree and warp backends ignore it.
         """
         directions = _f32(directions).reshape(-1, 3)  # _cast makes them unit; the sign of d.n is all used here
-        t, tri, normal = self._cast(origins, directions, normals=True)
+        t, tri, normal = self._cast(origins, directions, normals=True, threads=threads)
         facing = np.einsum("ij,ij->i", normal, directions)
         normal *= np.where(facing > 0, np.float32(-1), np.float32(1))[:, None]
         return t, tri, normal
@@ -143,8 +145,8 @@ class Oracle:
         """t (N,) float32 of the first hit of rays (N,3),(N,3) (inf on a miss): first_hit without the normals."""
         return self._cast(origins, directions)[0]
 
-    def _cast(self, origins: np.ndarray, directions: np.ndarray,
-              normals: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    def _cast(self, origins: np.ndarray, directions: np.ndarray, normals: bool = False,
+              threads: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
         """t (N,) float32 and triangle id (N,) int64 of the first hits (inf and -1 on a miss), and with
         `normals` the unit face normal (N,3) float32 as stored (zeros on a miss), else None."""
         directions = unit_directions(directions)
@@ -159,7 +161,7 @@ class Oracle:
             from open3d.t.geometry import RaycastingScene
 
             for sl, rays in _ray_chunks(origins, directions):
-                ans = self._scene.cast_rays(rays)
+                ans = self._scene.cast_rays(rays, nthreads=int(threads))
                 t[sl] = ans["t_hit"].numpy()  # inf on a miss
                 ids = ans["primitive_ids"].numpy()
                 tri[sl] = np.where(ids == RaycastingScene.INVALID_ID, -1, ids.astype(np.int64))
