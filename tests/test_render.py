@@ -503,6 +503,8 @@ def test_jittered_samples_spread_over_the_whole_pixel_about_its_centre():
     off_x, off_y = px[1:] - px[0], py[1:] - py[0]
     assert abs(off_x.mean()) < 0.02 and abs(off_y.mean()) < 0.02
     assert 0.45 < np.abs(off_x).max() <= 0.5 + 1e-4 and 0.45 < np.abs(off_y).max() <= 0.5 + 1e-4
+
+
 def test_the_mesh_bvh_casts_on_the_threads_a_render_records():
     """render_threads (compute_threads) is recorded beside the mesh's and the reference's frame times; open3d's
     cast_rays defaults to every core, so the BVH must be told the count or its figure is not what is recorded."""

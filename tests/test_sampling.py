@@ -399,3 +399,17 @@ def test_sdf_sigmas_cycle_within_each_surface_points_offsets(rng, tmp_path):
     near, far = np.abs(samples.sdf[0::2]), np.abs(samples.sdf[1::2])
     assert np.median(near) < 5e-4 and np.median(far) > 0.01
     assert np.median(near[: len(near) // 2]) < 5e-4 and np.median(far[: len(far) // 2]) > 0.01
+
+
+def test_surface_labels_are_exact_for_the_stored_float32_rays(sphere, tmp_path):
+    """A kept label is the distance from the stored (float32) x back along the stored d to the plane of the face the
+    ray was cast from: near grazing incidence, rounding x to float32 after labelling it in float64 moved the end of
+    the label ray off the surface by up to 6e-5 (the label is t for p + t theta in float64, not for the x stored)."""
+    cfg = config("surface", s_dr=4, s_p=4, perpendicular=False)
+    samples, _, _ = build(sphere, Oracle(sphere.mesh), cfg, "rays", 0, str(tmp_path))
+    hit = np.flatnonzero(samples.hit)
+    x, d, t = (a[hit].astype(np.float64) for a in (samples.x, samples.d, samples.t))
+    _, tri, _ = Oracle(sphere.mesh).first_hit(samples.x[hit], samples.d[hit])
+    v0, n = np.asarray(sphere.mesh.vertices)[sphere.mesh.faces[tri, 0]], np.asarray(sphere.mesh.face_normals)[tri]
+    t_plane = np.einsum("ij,ij->i", v0 - x, n) / np.einsum("ij,ij->i", d, n)  # float64 distance to the hit face's plane
+    assert np.abs(t - t_plane).max() < 2e-6

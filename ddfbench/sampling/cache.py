@@ -13,7 +13,7 @@ import numpy as np
 from ddfbench.truth.oracle import Oracle
 from ddfbench.truth.shapes import Shape
 
-CACHE_VERSION = 2  # 2: ray samples carry line_hit; bump when a sampler's output changes for the same config
+CACHE_VERSION = 3  # 2: ray samples carry line_hit; 3: surface labels exact for the stored float32 rays; bump when a sampler's output changes for the same config
 
 
 def dataset_key(shape: Shape, oracle: Oracle, cfg: Mapping[str, Any], kind: str, seed: int) -> str:

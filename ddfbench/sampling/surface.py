@@ -11,9 +11,9 @@ directions theta per point, s_p marching distances t along each; the sample is
    the next surface;
 3. one backward ray from the farthest kept sample x_far along -theta, which must hit at t_far
    (within 1e-5); otherwise the ray's samples are rejected (`verify`). Every other kept sample
-   lies on that verified segment, so its label is exact too. The stored x is then rounded to float32:
-   near grazing incidence that moves a label's end off the face by up to 6e-5 (on the sphere at s_dr = s_p
-   = 4, 17 of 41,490 hit labels beyond 1e-5; CHANGELOG.md, "Waiting for the next run of the suite").
+   lies on that verified segment, so its label is exact too. A kept label is then the float64 distance from the
+   stored float32 x back along the stored float32 d to p's face plane (labelling p + t theta in float64 and
+   rounding x afterwards put the label's end up to 6e-5 off the face at grazing incidence).
 
 Samples are rejected where t >= t_esc - 1e-5 (another part before t: `occluded`), where x lies
 less than 1e-5 above p's face plane (float rounding could put it under the face: `grazing`), and
@@ -148,6 +148,11 @@ def _marching_rays(pts, normals, p, oracle, rng, out: Collector, rejected, done:
     tk = t[r, k].astype(np.float32)
     th = np.take(th32, r, axis=0)
     x = np.take(base.astype(np.float32), r, axis=0) + tk[:, None] * th
+    # the label of the stored float32 ray: the float64 distance from x back along th to p's face plane (rounding x
+    # moves it by ~3e-8, which near grazing incidence moved the label's end off the face by up to 6e-5)
+    n_r = np.take(normals, r // s_dr, axis=0)
+    tk = (np.einsum("ij,ij->i", x - np.take(base, r, axis=0), n_r) / np.einsum("ij,ij->i", th.astype(np.float64), n_r)
+          ).astype(np.float32)
     out.add(x, -th, tk, done=done)
     esc = crossings[r] == 0  # the ray from x along theta is a tail of a forward ray that crosses nothing
     x_esc, th_esc = x[esc], th[esc]
