@@ -505,9 +505,10 @@ def test_jittered_samples_spread_over_the_whole_pixel_about_its_centre():
     assert 0.45 < np.abs(off_x).max() <= 0.5 + 1e-4 and 0.45 < np.abs(off_y).max() <= 0.5 + 1e-4
 
 
-def test_the_mesh_bvh_casts_on_the_threads_a_render_records():
+def test_the_mesh_bvh_casts_on_the_threads_a_render_records(tmp_path):
     """render_threads (compute_threads) is recorded beside the mesh's and the reference's frame times; open3d's
-    cast_rays defaults to every core, so the BVH must be told the count or its figure is not what is recorded."""
+    cast_rays defaults to every core, so the BVH must be told the count or its figure is not what is recorded, and
+    the record says on how many the reference cast (reference_threads: suite v1's records lack it)."""
     torch = pytest.importorskip("torch")
     rep = mesh_rep(trimesh.creation.icosphere(3, 0.4))
     real, seen = rep._oracle._scene, []
@@ -519,9 +520,15 @@ def test_the_mesh_bvh_casts_on_the_threads_a_render_records():
 
     rep._oracle._o3d_scene = Spy()
     saved = torch.get_num_threads()
+    cfg = preset("depth", width=8, height=8, timing={"repeats": 1, "warmup": 0})
     try:
-        torch.set_num_threads(1)
-        hits = rep.intersect(np.array([[0.0, 0.0, 2.0]]), np.array([[0.0, 0.0, -1.0]]))
+        for threads in (1, 2):
+            torch.set_num_threads(threads)
+            seen.clear()
+            hits = rep.intersect(np.array([[0.0, 0.0, 2.0]]), np.array([[0.0, 0.0, -1.0]]))
+            assert hits.hit[0] and seen and all(n == threads for n in seen)
+            seen.clear()
+            cost = render_scene(mesh_rep(trimesh.creation.icosphere(1, 0.4)), rep, cfg, str(tmp_path), seed=0)["cost"]
+            assert cost["reference_threads"] == cost["render_threads"] == threads and set(seen) == {threads}
     finally:
         torch.set_num_threads(saved)
-    assert hits.hit[0] and seen and all(n == 1 for n in seen)

@@ -69,14 +69,20 @@ class MeshFamily(Representation):
         self._set_mesh(self.mesh, device)
         return self
 
+    def cast_threads(self) -> int | None:
+        """The CPU threads this family's rays are cast on: open3d's BVH on compute_threads() (torch's, what a render
+        records as render_threads), embree's on the one calling thread; None for warp (the fit's device)."""
+        backend = str(self.cfg["backend"])
+        return None if backend == "warp" else 1 if backend == "embree" else compute_threads()
+
     def intersect(self, origins: np.ndarray, directions: np.ndarray, normals: bool = True) -> Hits:
         """First hit from the oracle's ray caster (cfg.backend: open3d, embree or warp), never the surface a ray
         starts on: a hit closer than T_MIN is cast again
         from T_MIN further along (up to 3 times, doubling T_MIN, for starts that graze a facet). open3d casts on
-        core.clock.compute_threads() threads (torch's, what a render record states), not on every core."""
+        cast_threads() threads (what a render record states), not on every core."""
         origins = np.asarray(origins, np.float64).reshape(-1, 3)
         directions = np.asarray(directions, np.float64).reshape(-1, 3)
-        threads = compute_threads()  # open3d: the threads a render records (render_threads), not every core
+        threads = self.cast_threads() or 0  # open3d's count (0 would be every core); embree and warp ignore it
         t, tri, normal = self._oracle.first_hit(origins, directions, threads)
         skipped = np.zeros(len(t), np.float64)
         t_min = T_MIN

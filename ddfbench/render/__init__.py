@@ -64,7 +64,7 @@ def _renders_folder(out_dir: str) -> str:
 
 def render_scene(rep: Representation, reference: Representation, scene_cfg: Mapping[str, Any], out_dir: str,
                  seed: int) -> dict[str, Any]:
-    """Render `rep` and the oracle `reference` (the GT mesh family) with the same cameras and samples.
+    """Render `rep` and the oracle `reference` (the GT mesh family, mesh_reference) with the same cameras and samples.
 
     Returns {"metrics": image accuracy (compare.py), "cost": render timings and rays/s of rep and of
     the reference, "counts": the work of rep's cold render, "artifacts": the renders folder relative
@@ -88,6 +88,7 @@ def render_scene(rep: Representation, reference: Representation, scene_cfg: Mapp
         "reference_render_cold_s": ref_timing.cold_s,
         "reference_render_warm_s": ref_timing.warm_s,
         "reference_rays_per_s": ref_rays_per_s,
+        "reference_threads": reference.cast_threads(),  # the reference BVH's CPU threads (None: warp's device)
         # warm-render speed of rep relative to the oracle's BVH, measured in this process (DESIGN: ratios)
         "render_speed_vs_reference": ref_timing.warm_s / timing.warm_s if timing.warm_s > 0 else 0.0,
     }
