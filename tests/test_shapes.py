@@ -97,6 +97,25 @@ def test_an_stl_joins_only_corners_at_exactly_one_position(tmp_path):
     assert shape.watertight and len(shape.mesh.vertices) == 12 and len(shape.mesh.faces) == 20
 
 
+def test_an_obj_cut_along_a_seam_reads_closed_and_keeps_its_vertex_order(tmp_path):
+    """OBJ (like PLY and glTF) repeats a vertex at a UV seam: the torus with the vertices of one face stored
+    again read as open (cut along the seam), its LODs decimated apart (catalog: `cow` repeats 1, `bunny10k`
+    1,400). Joined, it is the closed torus; the vertices keep their file order, so a mesh without repeats reads
+    exactly as its file stores it."""
+    torus = trimesh.creation.torus(major_radius=1.0, minor_radius=0.3)
+    v, f = np.asarray(torus.vertices), np.asarray(torus.faces).copy()
+    seam = np.arange(len(v), len(v) + 3)
+    v_cut = np.vstack([v, v[f[0]]])  # face 0's corners again, as a UV seam stores them
+    f[0] = seam
+    _write_obj(tmp_path / "seam.obj", v_cut, f)
+    _write_obj(tmp_path / "plain.obj", v, torus.faces)
+    assert not trimesh.Trimesh(v_cut, f, process=False).is_watertight
+    cut, plain = load_file(tmp_path / "seam.obj"), load_file(tmp_path / "plain.obj")
+    assert cut.watertight and len(cut.mesh.vertices) == len(v)
+    assert np.array_equal(cut.mesh.vertices, plain.mesh.vertices) and np.array_equal(cut.mesh.faces, plain.mesh.faces)
+    assert np.array_equal(plain.mesh.faces, torus.faces)  # the file's own vertex order, not np.unique's sorted one
+
+
 @pytest.mark.parametrize("offset", [1e3, 1e5, 1e7])
 def test_far_from_origin_normalizes_to_the_same_mesh(tmp_path, offset):
     sphere = trimesh.creation.icosphere(2, 0.7)

@@ -80,15 +80,23 @@ def read_mesh_file(path: str) -> trimesh.Trimesh:
         raise InputError(f"shape file {path}: could not be parsed as .{ext} ({msg})") from None
     if isinstance(loaded, trimesh.PointCloud) or not hasattr(loaded, "faces") or len(loaded.faces) == 0:
         raise InputError(f"shape file {path}: has no faces (a point cloud or empty mesh); a triangle mesh is needed")
-    return join_corners(loaded) if ext == "stl" else loaded
+    return join_corners(loaded)
 
 
 def join_corners(mesh: trimesh.Trimesh) -> trimesh.Trimesh:
-    """The mesh with the corners that lie at exactly one position made one vertex. STL stores each triangle's own
-    three corners: unjoined, a closed mesh reads as a soup (open, its LODs decimated apart). Exact equality, not
-    trimesh's rounding to 1e-8, so no two distinct corners of a tiny or far-off mesh are joined."""
-    unique, inverse = np.unique(np.asarray(mesh.vertices, np.float64), axis=0, return_inverse=True)
-    return trimesh.Trimesh(unique, inverse.reshape(-1)[np.asarray(mesh.faces)], process=False)
+    """The mesh with the vertices that lie at exactly one position made one (the first, in file order; the mesh
+    itself where none repeat). STL stores each triangle's own three corners and OBJ, PLY and glTF repeat a vertex
+    at a UV or normal seam: unjoined, a closed mesh reads as open (a soup, or cut along its seams) and its LODs
+    decimate apart. Exact equality, not trimesh's rounding to 1e-8, so no two distinct corners of a tiny or far-off
+    mesh are joined."""
+    v = np.asarray(mesh.vertices, np.float64)
+    _, first, inverse = np.unique(v, axis=0, return_index=True, return_inverse=True)
+    if len(first) == len(v):
+        return mesh
+    order = np.argsort(first)  # the kept vertices in file order
+    rank = np.empty_like(order)
+    rank[order] = np.arange(len(order))
+    return trimesh.Trimesh(v[first[order]], rank[inverse.reshape(-1)][np.asarray(mesh.faces)], process=False)
 
 
 # a coordinate near the offset 2^k rounds by up to half its ulp, 2^(k - 54): at most 1e-6 of the extent when the
