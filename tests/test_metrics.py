@@ -172,3 +172,26 @@ def test_normal_consistency_ignores_orientation():
                                           with_point_to_surface=False)
     assert same["normal_consistency"] > 0.95
     assert np.isclose(inside_out["normal_consistency"], same["normal_consistency"])
+
+
+def test_the_evaluation_points_are_a_stream_apart_from_the_samplers_face_draws():
+    """The surface sampler draws its area-weighted faces from default_rng(run seed); GT points drawn from that
+    seed too lie on the same faces (every one of them at s_fc = 1, where the chance share is 1 - 1/e). The
+    evaluation's stream of its own puts about the chance share on faces training drew, for every run seed."""
+    from ddfbench.sampling.triangles import face_plan
+
+    mesh = trimesh.creation.icosphere(3, 0.4)
+    mesh = trimesh.Trimesh(mesh.vertices * [1.0, 0.6, 0.3], mesh.faces, process=False)  # unequal face areas
+    normal_key = {tuple(np.round(n, 6)): i for i, n in enumerate(mesh.face_normals)}
+
+    def drawn_share(eval_seed, run_seed):
+        trained = set(face_plan(mesh, 1, "total", np.random.default_rng(run_seed)).tolist())
+        _, normals = metrics.sample_surface(mesh, len(mesh.faces), eval_seed)
+        return np.mean([normal_key[tuple(np.round(n, 6))] in trained for n in normals])
+
+    assert drawn_share(5, 5) == 1.0  # the shared stream (records before 1.7.0)
+    shares = [drawn_share(metrics.evaluation_seed(s), s) for s in range(4)]
+    assert all(abs(share - (1 - 1 / np.e)) < 0.06 for share in shares), shares
+    assert len({metrics.evaluation_seed(s) for s in range(1000)}) == 1000
+    assert metrics.record_evaluation_seed({"config": {"seed": 3}}) == 3  # a record before 1.7.0: the run's seed
+    assert metrics.record_evaluation_seed({"config": {"seed": 3}, "metrics": {"eval_seed": 17}}) == 17

@@ -11,6 +11,7 @@ import sys
 import pandas as pd
 import pytest
 
+from ddfbench.evaluate.metrics import evaluation_seed
 from ddfbench.report.reevaluate import main
 from ddfbench.run.runs import find_records
 from tests.conftest import rebuilt_differences
@@ -31,6 +32,7 @@ def test_reevaluation_at_the_records_settings_reproduces_them(tmp_path, capsys):
     assert done.returncode == 0, done.stderr[-2000:]
     recs = records(tmp_path / "single")
     assert len(recs) == 4 and all(r["status"] == "ok" for r in recs.values())
+    assert all(r["metrics"]["eval_seed"] == evaluation_seed(seed) != seed for (_, seed), r in recs.items())
     before = {k: json.dumps(r, sort_keys=True, default=str) for k, r in recs.items()}
     scene = ["--scene", "record", "--threads", "1"]  # each run's own 24x24 depth scene
     assert main([str(tmp_path / "single"), "--out", str(tmp_path / "re"), "--n-points", "2000", *scene]) == 0

@@ -57,6 +57,23 @@ def summary(values: np.ndarray) -> dict[str, float]:
     return {"mean": float(values.mean()), "median": float(np.median(values)), "p95": float(np.percentile(values, 95))}
 
 
+EVALUATION_STREAM = 0x6576616C  # "eval": the evaluation's draws are a stream of their own (evaluation_seed)
+
+
+def evaluation_seed(run_seed: int) -> int:
+    """The seed of a run's evaluation points (in [0, 2^63)): derived from the run's seed on a stream of its own
+    (numpy's SeedSequence of (run seed, EVALUATION_STREAM)), so the GT points do not repeat the area-weighted face
+    draws of a sampler seeded with the run's seed. Records before 1.7.0 evaluated on the run's seed itself."""
+    return int(np.random.SeedSequence([int(run_seed), EVALUATION_STREAM]).generate_state(1, np.uint64)[0] >> 1)
+
+
+def record_evaluation_seed(rec: dict[str, Any]) -> int:
+    """The evaluation seed a record's metrics were measured with: metrics.eval_seed, or the run's seed in records
+    before 1.7.0 (which lack it)."""
+    seed = (rec.get("metrics") or {}).get("eval_seed")
+    return int(seed) if seed is not None else int((rec.get("config") or {}).get("seed", 0))
+
+
 def sample_surface(mesh: trimesh.Trimesh, n: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
     """n points (n,3) area-uniform on the mesh and their face normals (n,3), reproducible from seed."""
     rng = np.random.default_rng(seed)
@@ -184,4 +201,5 @@ def geometry_metrics(
         out["noise_floor"] = {"chamfer_l2": floor["chamfer_l2"], "chamfer_l1": floor["chamfer_l1"],
                               "fscore": floor["fscore"]}
     out["n_points"] = int(n_points)
+    out["eval_seed"] = int(seed)
     return out

@@ -38,7 +38,7 @@ from ddfbench.core import plugins
 from ddfbench.core.errors import InputError
 from ddfbench.core.geometry import BOX_HALF
 from ddfbench.core.representation import Representation
-from ddfbench.evaluate.metrics import geometry_metrics
+from ddfbench.evaluate.metrics import geometry_metrics, record_evaluation_seed
 from ddfbench.models import load_family
 from ddfbench.report import measured, paired, tables
 from ddfbench.run.checks import writable_folder
@@ -167,7 +167,7 @@ def reevaluated(rec: dict[str, Any], n_points: int, scene: dict[str, Any] | str 
     else:
         reconstruction = _reconstruction(rec)
     out["metrics"] = geometry_metrics(gt, reconstruction, n_points, [float(r) for r in ev["radii"]],
-                                      seed=int(cfg.get("seed", 0)), noise_floor=bool(ev.get("noise_floor", True)),
+                                      seed=record_evaluation_seed(rec), noise_floor=bool(ev.get("noise_floor", True)),
                                       with_point_to_surface=bool(ev.get("point_to_surface", True)))
     if scene == RECORD_SCENE:
         scene = dict(cfg.get("scene") or {})

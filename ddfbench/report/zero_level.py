@@ -4,7 +4,7 @@ Where a finished SDF run's zero level lies against the true surface, from what t
 model and gt_mesh.ply): is its error a shift of the whole surface (a bias that one level removes) or a
 spread about it? For every ok run of a family answering rays by sphere tracing a signed field
 (models._sdf_family.SDFFamily: neural_sdf, gan_sdf, grid_sdf), at N points sampled on the GT mesh
-(metrics.sample_surface, seeded by the record's seed):
+(metrics.sample_surface, seeded by the record's evaluation seed):
 
 - value: the field there (field units: unit-cube units where the field's slope is 1); offset = value /
   |gradient|, the first-order signed distance from the GT surface to the learned zero level along the
@@ -15,7 +15,7 @@ spread about it? For every ok run of a family answering rays by sphere tracing a
 - The mesh extracted from the loaded model again at level 0 (a control: it should reproduce the
   record's own chamfer; a difference is the sampling noise of a mesh that came out otherwise) and at
   the level of the median value, each with the run's resolution and extraction options, against the
-  GT mesh at the record's point count, radii and seed. The median level is read off the GT surface,
+  GT mesh at the record's point count, radii and evaluation seed. The median level is read off the GT surface,
   an answer the representation does not have: its column bounds what one global shift of the level
   could give, it is not a result of the method.
 
@@ -40,7 +40,7 @@ import torch
 import trimesh
 
 from ddfbench.core.errors import InputError
-from ddfbench.evaluate.metrics import geometry_metrics, sample_surface
+from ddfbench.evaluate.metrics import geometry_metrics, record_evaluation_seed, sample_surface
 from ddfbench.models import load_family
 from ddfbench.models._sdf_family import SDFFamily
 from ddfbench.report import measured
@@ -94,8 +94,8 @@ def zero_level_row(rec: dict[str, Any], n_points: int) -> dict[str, Any]:
     cfg, ev = rec["config"], rec["config"].get("eval") or {}
     rep = saved_model(rec)
     gt = trimesh.load(artifact(rec, "gt_mesh"), force="mesh", process=False)
-    seed = int(cfg.get("seed", 0))
-    value, slope = value_and_slope(rep, sample_surface(gt, n_points, seed)[0])
+    seed, eval_seed = int(cfg.get("seed", 0)), record_evaluation_seed(rec)
+    value, slope = value_and_slope(rep, sample_surface(gt, n_points, eval_seed)[0])
     off = offsets(value, slope)
     level = float(np.nanmedian(value)) if np.isfinite(value).any() else math.nan
     lipschitz = float((rep.cfg or {}).get("extract_lipschitz", 1.0))
@@ -107,7 +107,7 @@ def zero_level_row(rec: dict[str, Any], n_points: int) -> dict[str, Any]:
                            "offset_mean_abs": float(np.nanmean(np.abs(off))), "level": level,
                            "chamfer_l2_record": float((rec.get("metrics") or {}).get("chamfer_l2", math.nan))}
     for name, lv in (("at_0", 0.0), ("at_level", level)):
-        row.update({f"{k}_{name}": v for k, v in _mesh_metrics(rep, gt, lv, ev, seed).items()})
+        row.update({f"{k}_{name}": v for k, v in _mesh_metrics(rep, gt, lv, ev, eval_seed).items()})
     return row
 
 

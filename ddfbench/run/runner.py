@@ -24,7 +24,7 @@ from ddfbench.core.atomic import write_atomic
 from ddfbench.core.errors import InputError, checked_int, first_line, one_line
 from ddfbench.core.geometry import BOX_HALF
 from ddfbench.core.representation import Budget, FitData, Representation
-from ddfbench.evaluate.metrics import cloud_metrics, geometry_metrics, penalty_metrics, sample_surface
+from ddfbench.evaluate.metrics import cloud_metrics, evaluation_seed, geometry_metrics, penalty_metrics, sample_surface
 from ddfbench.fit.budget import fit_limit, fit_record
 from ddfbench.fit.checkpoint import FILE as CHECKPOINT_FILE
 from ddfbench.fit.checkpoint import Checkpoint, code_fingerprint
@@ -142,7 +142,7 @@ def _stages(cfg: Mapping[str, Any], rdir: str, device: str, seed: int, out: dict
         artifacts["reconstruction"] = "reconstruction.ply"
 
     t0 = time.perf_counter()
-    out["metrics"] = geometry_metrics(shape.mesh, rec, n_points, radii, seed=seed,
+    out["metrics"] = geometry_metrics(shape.mesh, rec, n_points, radii, seed=evaluation_seed(seed),
                                       noise_floor=bool(ev.get("noise_floor", True)),
                                       with_point_to_surface=bool(ev.get("point_to_surface", True)))
     cost["metrics_s"] = time.perf_counter() - t0
