@@ -8,7 +8,7 @@ import sys
 import pytest
 
 from ddfbench.core.errors import InputError
-from ddfbench.fit.budget import fit_limit, fit_record
+from ddfbench.fit.budget import entry_per_batch, fit_limit, fit_record, sample_batch
 from ddfbench.run.runs import find_records
 
 TRAIN = {"max_steps": 1000, "max_seconds": 5.0, "max_epochs": 2.5}
@@ -22,6 +22,20 @@ def test_steps_and_epochs_have_no_time_limit_and_wall_clock_keeps_it():
     assert fit_limit({**TRAIN, "budget": "epochs"}, {"batch": 250}, 1000).max_steps == 10
     clock = fit_limit({**TRAIN, "budget": "wall-clock"}, {}, None)
     assert (clock.max_steps, clock.max_seconds) == (1000, 5.0)
+
+
+def test_an_epoch_counts_the_draws_from_the_sample_set_not_a_visibility_heads_entry_labels():
+    """The DDF with a visibility head fills entry_share of its batch with entry labels the label count leaves out:
+    one epoch over 1,536,000 ray samples at batch 2048 and share 0.25 is 1,000 steps of 1,536 samples (it was 750
+    steps, 0.75 passes). A model without the head (clamp visibility) draws its whole batch."""
+    head = {"batch": 2048, "visibility": "head", "entry_share": 0.25}
+    assert entry_per_batch(head) == 512 and sample_batch(head) == 1536
+    assert entry_per_batch({**head, "batch": 500}) == 124  # even: as many entry hits as misses
+    epoch = {**TRAIN, "budget": "epochs", "max_epochs": 1, "max_steps": None}
+    assert fit_limit(epoch, head, 1_536_000).max_steps == 1000
+    assert fit_record(fit_limit(epoch, head, 1_536_000), "max_steps", 1000, head, 1_536_000)["epochs"] == 1.0
+    clamp = {**head, "visibility": "clamp"}
+    assert entry_per_batch(clamp) == 0 and fit_limit(epoch, clamp, 1_536_000).max_steps == 750
 
 
 def test_the_record_names_the_bound_that_ended_the_fit():
@@ -48,10 +62,11 @@ def test_an_epoch_budget_on_a_label_subset_runs_and_is_recorded(tmp_path):
     done = subprocess.run([sys.executable, "-m", "ddfbench", *args], capture_output=True, text=True, timeout=600)
     assert done.returncode == 0, done.stderr[-2000:]
     (rec,) = find_records(str(tmp_path))
-    assert rec["fit"]["steps"] == 4 and rec["fit"]["epochs"] == pytest.approx(2.0)  # 2 x 1000 / 500
+    # the batch of 500 holds 124 entry labels (entry_share 0.25, an even count): 376 of the 1000 labels a step
+    assert rec["fit"]["entry_labels"] == 1000 and rec["fit"]["entry_per_batch"] == 124  # the subset keeps line_hit
+    assert rec["fit"]["steps"] == 6 and rec["fit"]["epochs"] == pytest.approx(6 * 376 / 1000)  # ceil(2 x 1000 / 376)
     assert rec["fit"]["budget"] == "epochs"
     assert rec["sampling"]["n_samples"] == 1000 and rec["sampling"]["n_generated"] == 3000
-    assert rec["fit"]["entry_labels"] == 1000 and rec["fit"]["entry_per_batch"] > 0  # the subset keeps line_hit
     too_many = subprocess.run([sys.executable, "-m", "ddfbench", *args[:-1], "train.n_labels=5000",
                                f"out_dir={tmp_path}/b"], capture_output=True, text=True, timeout=600)
     assert too_many.returncode != 0 and "train.n_labels=5000" in too_many.stderr + too_many.stdout

@@ -3,19 +3,19 @@
 `train.budget` (conf/train/default.yaml) picks one:
   steps       train.max_steps optimizer steps (null: the model's fit_steps); no time limit. Repeatable: the
               same steps on any machine.
-  epochs      train.max_epochs passes over the labels: ceil(epochs x n_labels / batch) steps, batch from
-              the model config (`batch`); no time limit.
+  epochs      train.max_epochs passes over the labels: ceil(epochs x n_labels / sample_batch) steps, from
+              the model config's `batch` (below); no time limit.
   wall-clock  train.max_seconds of training (or max_steps if set, whichever ends first): "what do I get in N
               seconds" runs. The steps taken vary with the machine and its load, so such records are
               labelled "wall-clock" in the record (fit.budget) and in every table.
-The record's fit.budget is the bound that ended the fit, fit.epochs steps x batch / labels (draws, as below).
+The record's fit.budget is the bound that ended the fit, fit.epochs steps x sample_batch / labels (draws, as below).
 
 An epoch counts draws, not distinct labels: every family draws its batches with replacement (torch.randint), so
-one epoch shows about 1 - 1/e = 63 % of the labels at least once (40 epochs: all of them). And `batch` is the
-model's whole batch: the DDF with a visibility head fills entry_share of it with entry labels
-(ddfbench.models.ddf.fit.line_entry_labels), which the label count leaves out, so there an epoch draws
-(1 - entry_share) x the labels (0.75 at the ddf preset's 0.25: reports/ablation's fit.epochs 1.000 is 0.750
-passes over its ray samples).
+one epoch shows about 1 - 1/e = 63 % of the labels at least once (40 epochs: all of them). An epoch counts the draws
+from the sample set alone (sample_batch): the DDF with a visibility head fills entry_per_batch of its `batch` with
+entry labels (ddfbench.models.ddf.fit.line_entry_labels) that the label count leaves out, so its epoch takes
+ceil(epochs x labels / (batch - entry labels)) steps (before 1.7.0, labels / batch: reports/ablation's "1 epoch"
+was 0.750 passes over its ray samples, 7,915 steps where a pass takes 10,553).
 """
 
 from __future__ import annotations
@@ -39,9 +39,21 @@ class FitLimit:
     max_seconds: float
 
 
-def batch_size(model_cfg: Mapping[str, Any]) -> int | None:
-    """The model's training batch (labels per step) from its config, None when it declares none."""
-    return None if model_cfg.get("batch") is None else int(model_cfg["batch"])
+def entry_per_batch(model_cfg: Mapping[str, Any]) -> int:
+    """Entry labels in each batch of a model with a visibility head (an even count: as many hits as misses, from
+    `entry_share` of `batch`); 0 for every other model. The DDF's fit draws none where its lines give one class
+    alone (then it draws `batch` samples a step)."""
+    if model_cfg.get("visibility") != "head" or model_cfg.get("batch") is None:
+        return 0
+    return 2 * int(round(float(model_cfg.get("entry_share") or 0.0) * int(model_cfg["batch"]) / 2))
+
+
+def sample_batch(model_cfg: Mapping[str, Any]) -> int | None:
+    """Labels of the sample set one optimizer step draws: the model's `batch` less its entry labels
+    (entry_per_batch); None when the model declares no batch (no batched fit)."""
+    if model_cfg.get("batch") is None:
+        return None
+    return int(model_cfg["batch"]) - entry_per_batch(model_cfg)
 
 
 def fit_limit(train_cfg: Mapping[str, Any], model_cfg: Mapping[str, Any], n_labels: int | None) -> FitLimit:
@@ -60,7 +72,7 @@ def fit_limit(train_cfg: Mapping[str, Any], model_cfg: Mapping[str, Any], n_labe
     epochs = train_cfg.get("max_epochs")
     if epochs is None or float(epochs) <= 0:
         raise InputError(f"train.max_epochs {epochs!r}: train.budget=epochs needs a number > 0")
-    batch = batch_size(model_cfg)
+    batch = sample_batch(model_cfg)
     if batch is None or not n_labels:
         # families without a batched fit (mesh, grid SDF) build once; the limit does not bind them
         return FitLimit(kind, cap, math.inf)
@@ -70,8 +82,8 @@ def fit_limit(train_cfg: Mapping[str, Any], model_cfg: Mapping[str, Any], n_labe
 def fit_record(limit: FitLimit, stop: str | None, steps: int, model_cfg: Mapping[str, Any],
                n_labels: int | None) -> dict[str, Any]:
     """{budget, epochs} for the record's `fit`: budget is "wall-clock" when the time limit ended the fit,
-    else the configured kind; epochs = steps x batch / labels (None without a batch or labels)."""
-    batch = batch_size(model_cfg)
+    else the configured kind; epochs = steps x sample_batch / labels (None without a batch or labels)."""
+    batch = sample_batch(model_cfg)
     return {
         "budget": "wall-clock" if stop == "max_seconds" else limit.kind,
         "epochs": steps * batch / n_labels if batch and n_labels else None,

@@ -12,6 +12,7 @@ from torch import nn
 from ddfbench.core.errors import InputError
 from ddfbench.core.geometry import box_entry
 from ddfbench.core.representation import Budget, FitData, FitStats, Probe, Representation
+from ddfbench.fit.budget import entry_per_batch
 from ddfbench.fit.train import Schedule, seed_everything, train_loop
 from ddfbench.models.ddf.network import DDFNet
 
@@ -70,7 +71,7 @@ def fit(rep: Representation, data: FitData, budget: Budget, probe: Probe | None 
     xe, de, he = (torch.as_tensor(a, device=dev) for a in line_entry_labels(s.x, s.d, line_hit, rep.domain, lines))
     n_hit_entries = int(he.sum())
     both = 0 < n_hit_entries < len(he)  # one class alone would only bias the head: then none
-    n_entry = 2 * int(round(float(cfg["entry_share"]) * int(cfg["batch"]) / 2)) if both and cfg["visibility"] == "head" else 0
+    n_entry = entry_per_batch(cfg) if both else 0  # as fit.budget counts an epoch's steps
     n_main = int(cfg["batch"]) - n_entry
     order = torch.argsort((~he).to(torch.uint8), stable=True)  # entry hits first, then misses
     xe, de, he = xe[order], de[order], he[order]
