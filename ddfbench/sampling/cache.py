@@ -13,7 +13,9 @@ import numpy as np
 from ddfbench.truth.oracle import Oracle
 from ddfbench.truth.shapes import Shape
 
-CACHE_VERSION = 3  # 2: ray samples carry line_hit; 3: surface labels exact for the stored float32 rays; bump when a sampler's output changes for the same config
+# bump when a sampler's output changes for the same config; 2: ray samples carry line_hit; 3: surface labels exact
+# for the stored float32 rays
+CACHE_VERSION = 3
 
 
 def dataset_key(shape: Shape, oracle: Oracle, cfg: Mapping[str, Any], kind: str, seed: int) -> str:
