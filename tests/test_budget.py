@@ -36,6 +36,8 @@ def test_an_epoch_counts_the_draws_from_the_sample_set_not_a_visibility_heads_en
     assert fit_record(fit_limit(epoch, head, 1_536_000), "max_steps", 1000, head, 1_536_000)["epochs"] == 1.0
     clamp = {**head, "visibility": "clamp"}
     assert entry_per_batch(clamp) == 0 and fit_limit(epoch, clamp, 1_536_000).max_steps == 750
+    # a fit whose lines gave one class alone draws no entry labels: its record counts the whole batch a step
+    assert fit_record(fit_limit(epoch, head, 1_536_000), "max_steps", 1000, head, 1_536_000, 0)["epochs"] == 2048 / 1536
 
 
 def test_the_record_names_the_bound_that_ended_the_fit():
@@ -55,7 +57,8 @@ def test_bad_budgets_name_the_key(train, message):
 
 @pytest.mark.slow
 def test_an_epoch_budget_on_a_label_subset_runs_and_is_recorded(tmp_path):
-    args = ["model=ddf", "model.width=16", "model.depth=2", "model.batch=500", "shape=sphere", "eval=smoke",
+    # ddf_tuned takes its visibility head and entry_share from the family's defaults (conf/model/ddf.yaml)
+    args = ["model=ddf_tuned", "model.width=16", "model.depth=2", "model.batch=500", "shape=sphere", "eval=smoke",
             "eval.n_points=1000", "eval.mesh_resolution=16", "scene=none", "sampling=random",
             "sampling.n_samples=3000", "train.budget=epochs", "train.max_epochs=2", "train.n_labels=1000",
             "train.n_probes=0", "threads=1", "quiet=true", f"out_dir={tmp_path}"]

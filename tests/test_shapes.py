@@ -103,13 +103,15 @@ def test_an_obj_cut_along_a_seam_reads_closed_and_keeps_its_vertex_order(tmp_pat
     1,400). Joined, it is the closed torus; the vertices keep their file order, so a mesh without repeats reads
     exactly as its file stores it."""
     torus = trimesh.creation.torus(major_radius=1.0, minor_radius=0.3)
-    v, f = np.asarray(torus.vertices), np.asarray(torus.faces).copy()
-    seam = np.arange(len(v), len(v) + 3)
-    v_cut = np.vstack([v, v[f[0]]])  # face 0's corners again, as a UV seam stores them
-    f[0] = seam
-    _write_obj(tmp_path / "seam.obj", v_cut, f)
+    v, f = np.asarray(torus.vertices), np.asarray(torus.faces)
+    k = len(v) // 2
+    face = int(np.flatnonzero(f.max(axis=1) < k)[0])  # a face whose corners come before the seam's copies
+    v_cut = np.vstack([v[:k], v[f[face]], v[k:]])  # its corners again mid-file, as a UV seam stores them
+    f_cut = np.where(f < k, f, f + 3)
+    f_cut[face] = [k, k + 1, k + 2]
+    _write_obj(tmp_path / "seam.obj", v_cut, f_cut)
     _write_obj(tmp_path / "plain.obj", v, torus.faces)
-    assert not trimesh.Trimesh(v_cut, f, process=False).is_watertight
+    assert not trimesh.Trimesh(v_cut, f_cut, process=False).is_watertight
     cut, plain = load_file(tmp_path / "seam.obj"), load_file(tmp_path / "plain.obj")
     assert cut.watertight and len(cut.mesh.vertices) == len(v)
     assert np.array_equal(cut.mesh.vertices, plain.mesh.vertices) and np.array_equal(cut.mesh.faces, plain.mesh.faces)

@@ -101,7 +101,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--repeats", type=int, default=9, help="timed warm calls per figure (median and IQR)")
     ap.add_argument("--warmup", type=int, default=1, help="untimed calls after the cold one")
     ap.add_argument("--threads", type=int, default=0,
-                    help="torch threads (0: torch's default); open3d and scipy use every core")
+                    help="torch threads (0: torch's default), on which the mesh family's open3d BVH casts too; "
+                         "sampling's open3d and scipy use every core")
     ap.add_argument("--only", default=None, help="comma-separated sections to run (default: all but "
                     f"{', '.join(ON_REQUEST)}; on a CPU device also not {', '.join(CUDA_ONLY_BY_DEFAULT)})")
     ap.add_argument("--oracle-backend", default="open3d", choices=("open3d", "warp"),

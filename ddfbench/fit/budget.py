@@ -15,7 +15,7 @@ one epoch shows about 1 - 1/e = 63 % of the labels at least once (40 epochs: all
 from the sample set alone (sample_batch): the DDF with a visibility head fills entry_per_batch of its `batch` with
 entry labels (ddfbench.models.ddf.fit.line_entry_labels) that the label count leaves out, so its epoch takes
 ceil(epochs x labels / (batch - entry labels)) steps (before 1.7.0, labels / batch: reports/ablation's "1 epoch"
-was 0.750 passes over its ray samples, 7,915 steps where a pass takes 10,553).
+was 0.750 passes over its ray samples, 7,915 steps where a pass takes ~10,550).
 """
 
 from __future__ import annotations
@@ -80,10 +80,14 @@ def fit_limit(train_cfg: Mapping[str, Any], model_cfg: Mapping[str, Any], n_labe
 
 
 def fit_record(limit: FitLimit, stop: str | None, steps: int, model_cfg: Mapping[str, Any],
-               n_labels: int | None) -> dict[str, Any]:
+               n_labels: int | None, entry_drawn: int | None = None) -> dict[str, Any]:
     """{budget, epochs} for the record's `fit`: budget is "wall-clock" when the time limit ended the fit,
-    else the configured kind; epochs = steps x sample_batch / labels (None without a batch or labels)."""
+    else the configured kind; epochs = steps x sample_batch / labels (None without a batch or labels).
+    entry_drawn: the entry labels a step of the fit drew where it says (the DDF's fit.entry_per_batch: 0 where its
+    lines gave one class alone, and then its steps drew the whole batch, more passes than the limit planned)."""
     batch = sample_batch(model_cfg)
+    if batch is not None and entry_drawn is not None:
+        batch = int(model_cfg["batch"]) - int(entry_drawn)
     return {
         "budget": "wall-clock" if stop == "max_seconds" else limit.kind,
         "epochs": steps * batch / n_labels if batch and n_labels else None,

@@ -3,7 +3,8 @@
 
 The finished runs of an experiment measured again at other evaluation settings, from what each run
 saved: its reconstruction (reconstruction.ply) against its GT mesh (gt_mesh.ply) at N surface points
-per mesh and the record's own radii and seed, and, with --scene, its saved model rendered on the CPU
+per mesh and the record's own radii and evaluation seed (metrics.eval_seed; the run's seed before 1.7.0),
+and, with --scene, its saved model rendered on the CPU
 with conf/scene/<NAME>.yaml (or `record`: the run's own scene) against the GT mesh's BVH (one timed render: timings are not the point; a
 float16 storage level renders its rounded weights). A sweep whose probes needed a small point count
 (convergence: 20k) is so compared with targets stated at the 100k points of every other experiment,

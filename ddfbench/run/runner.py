@@ -106,7 +106,7 @@ def _stages(cfg: Mapping[str, Any], rdir: str, device: str, seed: int, out: dict
     domain = float(cfg.get("domain", BOX_HALF))
     rep = Family(dict(cfg["model"]), domain=domain)
     n_labels = info.get("n_samples")
-    limit = fit_limit(tr, cfg["model"], n_labels)
+    limit = fit_limit(tr, rep.cfg, n_labels)  # rep.cfg: the preset over its family's defaults (batch, visibility)
     every = float(cfg.get("checkpoint_every", 0) or 0)
     budget = Budget(max_steps=limit.max_steps, max_seconds=limit.max_seconds, device=device,
                     seed=seed, n_probes=int(tr.get("n_probes", 5)),
@@ -120,7 +120,8 @@ def _stages(cfg: Mapping[str, Any], rdir: str, device: str, seed: int, out: dict
     cost["fit_s"] = float(stats.seconds)
     out["fit"] = {"steps": stats.steps, "seconds": stats.seconds, "loss_curve": stats.loss_curve,
                   "probes": stats.probes, "status": stats.status, "message": stats.message, **stats.extra,
-                  **fit_record(limit, stats.extra.get("stop"), stats.steps, cfg["model"], n_labels)}
+                  **fit_record(limit, stats.extra.get("stop"), stats.steps, rep.cfg, n_labels,
+                             stats.extra.get("entry_per_batch"))}
     if stats.status != "ok":
         raise StageFailed(f"fit of {Family.family} failed: {stats.message}")
 
