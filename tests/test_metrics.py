@@ -178,6 +178,7 @@ def test_the_evaluation_points_are_a_stream_apart_from_the_samplers_face_draws()
     """The surface sampler draws its area-weighted faces from default_rng(run seed); GT points drawn from that
     seed too lie on the same faces (every one of them at s_fc = 1, where the chance share is 1 - 1/e). The
     evaluation's stream of its own puts about the chance share on faces training drew, for every run seed."""
+    from ddfbench.report.reevaluate import record_evaluation_seed
     from ddfbench.sampling.triangles import face_plan
 
     mesh = trimesh.creation.icosphere(3, 0.4)
@@ -193,5 +194,5 @@ def test_the_evaluation_points_are_a_stream_apart_from_the_samplers_face_draws()
     shares = [drawn_share(metrics.evaluation_seed(s), s) for s in range(4)]
     assert all(abs(share - (1 - 1 / np.e)) < 0.06 for share in shares), shares
     assert len({metrics.evaluation_seed(s) for s in range(1000)}) == 1000
-    assert metrics.record_evaluation_seed({"config": {"seed": 3}}) == 3  # a record before 1.7.0: the run's seed
-    assert metrics.record_evaluation_seed({"config": {"seed": 3}, "metrics": {"eval_seed": 17}}) == 17
+    assert record_evaluation_seed({"config": {"seed": 3}}) == 3  # a record before 1.7.0: the run's seed
+    assert record_evaluation_seed({"config": {"seed": 3}, "metrics": {"eval_seed": 17}}) == 17

@@ -67,13 +67,6 @@ def evaluation_seed(run_seed: int) -> int:
     return int(np.random.SeedSequence([int(run_seed), EVALUATION_STREAM]).generate_state(1, np.uint64)[0] >> 1)
 
 
-def record_evaluation_seed(rec: dict[str, Any]) -> int:
-    """The evaluation seed a record's metrics were measured with: metrics.eval_seed, or the run's seed in records
-    before 1.7.0 (which lack it)."""
-    seed = (rec.get("metrics") or {}).get("eval_seed")
-    return int(seed) if seed is not None else int((rec.get("config") or {}).get("seed", 0))
-
-
 def sample_surface(mesh: trimesh.Trimesh, n: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
     """n points (n,3) area-uniform on the mesh and their face normals (n,3), reproducible from seed."""
     rng = np.random.default_rng(seed)

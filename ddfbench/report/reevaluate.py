@@ -39,7 +39,7 @@ from ddfbench.core import plugins
 from ddfbench.core.errors import InputError
 from ddfbench.core.geometry import BOX_HALF
 from ddfbench.core.representation import Representation
-from ddfbench.evaluate.metrics import geometry_metrics, record_evaluation_seed
+from ddfbench.evaluate.metrics import geometry_metrics
 from ddfbench.models import load_family
 from ddfbench.report import measured, paired, tables
 from ddfbench.run.checks import writable_folder
@@ -55,6 +55,13 @@ def artifact(rec: dict[str, Any], name: str) -> str:
     if not rel or not os.path.exists(path):
         raise InputError(f"{rec['_dir']}: no {name} artifact ({path or 'not in the record'})")
     return path
+
+
+def record_evaluation_seed(rec: dict[str, Any]) -> int:
+    """The evaluation seed a record's metrics were measured with: metrics.eval_seed, or the run's seed in records
+    before 1.7.0 (which lack it)."""
+    seed = (rec.get("metrics") or {}).get("eval_seed")
+    return int(seed) if seed is not None else int((rec.get("config") or {}).get("seed", 0))
 
 
 def _reconstruction(rec: dict[str, Any]) -> trimesh.Trimesh:

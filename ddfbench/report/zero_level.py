@@ -40,7 +40,7 @@ import torch
 import trimesh
 
 from ddfbench.core.errors import InputError
-from ddfbench.evaluate.metrics import geometry_metrics, record_evaluation_seed, sample_surface
+from ddfbench.evaluate.metrics import geometry_metrics, sample_surface
 from ddfbench.models import load_family
 from ddfbench.models._sdf_family import SDFFamily
 from ddfbench.report import measured
@@ -48,6 +48,7 @@ from ddfbench.report.reevaluate import (
     artifact,
     checked_counts,
     finished_records,
+    record_evaluation_seed,
     records_parser,
     saved_model,
     unreadable,
