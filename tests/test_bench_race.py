@@ -107,3 +107,24 @@ def test_a_short_race_leaves_out_embree_the_loops_and_the_eager_tracers(tmp_path
         assert not raced & {"embree_all_cores", "neural_sdf_trace", "grid_sdf_trace", "neural_sdf_device_fp32"}
         assert {"grid_sdf_device_fp32", "warp_bvh", "ddf_fp32"} <= raced
         assert det[set_name]["fastest"]["grid_sdf"] == "grid_sdf_device_fp32" and "neural_sdf" not in det[set_name]["fastest"]
+
+
+def test_a_race_without_its_main_part_races_only_the_capacities(tmp_path):
+    """main=false (issue 51's capacity repeats): no SDF is made and neither ray set nor the sweep is raced; the chosen
+    capacity races beside the BVH on the seed's primary rays, and bench.repeats pools such runs."""
+    from ddfbench.bench import repeats
+
+    sets = ["race.main=false", "race.embree=false", "race.capacity_levels=[c2]", "race.lods=[]"]
+    for seed in (1, 2):
+        code = main(["--sizes", "small", "--only", "race", "--repeats", "1", "--warmup", "0", "--threads", "1",
+                     "--out", str(tmp_path / f"s{seed}"), "--set", f"race.ray_seed={seed}",
+                     *[a for s in sets for a in ("--set", s)]])
+        assert code == 0
+    paths = [str(next((tmp_path / f"s{seed}").glob("bench-cpu-small*.json"))) for seed in (1, 2)]
+    det = json.loads(open(paths[0]).read())["sections"]["race"]["details"]
+    assert not {"primary", "incoherent", "sweep", "neural_sdf", "grid_sdf"} & set(det)
+    assert list(det["capacities"]) == ["c2"] and det["capacities"]["c2"]["warp_bvh"]["mask_iou"] == 1.0
+    assert det["capacities"]["c2"]["ddf_fp32"]["rays_per_s"] > 0
+    rows = {r["quantity"]: r for r in repeats.pool([repeats.load_race(p) for p in paths])}
+    assert rows["capacity c2 (128x4): DDF / warp_bvh"]["n"] == 2
+    assert not any(q.startswith(("primary", "incoherent")) for q in rows)

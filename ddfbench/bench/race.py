@@ -36,8 +36,9 @@ fit_seconds, fit_steps (0: by fit_seconds), prepared (folder or null), grid_reso
 samples), chunk (DDF rays per network call), compile (bool: the DDF's torch.compile variants), sdf_compile (bool:
 the neural SDF's device tracer compiled too, CUDA), sdf_eager (bool: its eager device tracers), sdf_loops (bool:
 the numpy-in-and-out tracing loops), embree (bool: Embree on every core, and the reference; false: the oracle's
-answers are the reference), capacities (bool), capacity_levels (null: all; or a list, e.g. [c3, c4]), lods
-(triangle counts), model / neural (overrides of the main DDF / neural SDF).
+answers are the reference), main (bool; false: neither ray set's race of every contestant nor the sweep, and no
+SDF is made: only the capacities, each beside the BVH and the LODs), capacities (bool), capacity_levels (null: all;
+or a list, e.g. [c3, c4]), lods (triangle counts), model / neural (overrides of the main DDF / neural SDF).
 """
 
 from __future__ import annotations
@@ -121,7 +122,10 @@ def run(ctx: Context) -> SectionResult:
         lambda: surface.sample(shape, oracle, preset("sampling", "surface"), "rays", np.random.default_rng(0))[0])
     cold = result.details["cold"] = {}
     (ddf, result.details["ddf"]), cold["ddf_load_or_fit_s"] = timed(lambda: train_ddf(ctx, samples, dict(s.get("model") or {})))
-    nsdf, result.details["neural_sdf"], gsdf, result.details["grid_sdf"] = sdf_contestants(ctx)
+    sdfs = None
+    if s.get("main", True):  # only the two ray sets' race has the SDFs among its contestants
+        nsdf, result.details["neural_sdf"], gsdf, result.details["grid_sdf"] = sdf_contestants(ctx)
+        sdfs = (nsdf, gsdf)
     warp, cold["warp_bvh_build_s"] = timed(lambda: WarpCaster(shape.mesh.vertices, shape.mesh.faces, ctx.device))
     lods = lod_casters(ctx, shape.mesh, WarpCaster, result.details)
 
@@ -137,17 +141,21 @@ def run(ctx: Context) -> SectionResult:
     reference = pool.hit_distance if pool is not None else oracle.hit_distance
     result.details["reference"] = "embreex pool" if pool is not None else f"{ctx.oracle_backend} oracle"
     try:
-        _race_all(ctx, result, samples, ddf, nsdf, gsdf, warp, lods, reference, embree)
+        primary = view_rays(int(s["px"]), eye=orbit_eye(int(s.get("ray_seed", 1))))
+        if sdfs is not None:
+            _race_sets(ctx, result, ddf, *sdfs, warp, primary, reference, embree)
+        if s.get("capacities", True):
+            capacities(ctx, samples, primary, reference, {"warp_bvh": warp, **lods}, result)
     finally:
         if pool is not None:
             pool.close()
     return result
 
 
-def _race_all(ctx: Context, result: SectionResult, samples, ddf, nsdf, gsdf, warp, lods: dict, reference: Callable,
-              embree: dict) -> None:
-    """The two ray sets, the sweep and the capacities (run's body, once every contestant is built);
-    reference(o, d) -> t (N,): the depth every contestant is scored against."""
+def _race_sets(ctx: Context, result: SectionResult, ddf, nsdf, gsdf, warp, primary: tuple, reference: Callable,
+               embree: dict) -> None:
+    """Every contestant on the two ray sets (primary: the view's (o, d), and the seed's incoherent rays), then the
+    sweep (run's body once every contestant is built); reference(o, d) -> t (N,): the depth they are scored against."""
     s, chunk, seed = ctx.sizes, int(ctx.sizes["chunk"]), int(ctx.sizes.get("ray_seed", 1))
     variants = ddf_variants(ctx, ddf, compile_too=True, details=result.details)
     tracers = device_tracers(ctx, nsdf, gsdf, result.details)
@@ -156,8 +164,7 @@ def _race_all(ctx: Context, result: SectionResult, samples, ddf, nsdf, gsdf, war
     if s.get("sdf_loops", True):  # the numpy-in-and-out loop the device tracers are measured against
         contestants.update({"neural_sdf_trace": lambda o, d, on, dn: sdf_depth(nsdf, on, dn),
                             "grid_sdf_trace": lambda o, d, on, dn: sdf_depth(gsdf, on, dn)})
-    ray_sets = {"primary": view_rays(int(s["px"]), eye=orbit_eye(seed)),
-                "incoherent": incoherent_rays(int(s["incoherent_rays"]), seed=seed)}
+    ray_sets = {"primary": primary, "incoherent": incoherent_rays(int(s["incoherent_rays"]), seed=seed)}
     for set_name, (o_np, d_np) in ray_sets.items():
         n = len(o_np)
         o_dev, d_dev = torch.as_tensor(o_np, device=ctx.device), torch.as_tensor(d_np, device=ctx.device)
@@ -205,8 +212,6 @@ def _race_all(ctx: Context, result: SectionResult, samples, ddf, nsdf, gsdf, war
 
         result.details["fused_kernel_config"] = {"mlp": config("mlp"), "depth": config("depth")}
     sweep(ctx, variants, best, warp, embree, result)
-    if s.get("capacities", True):
-        capacities(ctx, samples, ray_sets["primary"], reference, {"warp_bvh": warp, **lods}, result)
 
 
 def sweep(ctx: Context, variants: dict[str, DDFDepth], best_name: str, warp, embree: dict,

@@ -3,8 +3,8 @@
 # network and one call carries 64 MiB, the working tree included: move reports/ aside during the calls). .devA for
 # the first call (stage_and_parts.sh as pre.sh and Warp's first part, as much as fits), .devB for the second
 # (Warp's second part and the rest of its wheel, the wheels the bench needs, the bunny, setup_b.sh, run_race.sh
-# as go.sh, run_train_curves.sh, run_repeats.sh, and with PREPARED=DIR that folder of trained networks and LODs
-# (ddfbench.bench.prepared) as .devB/prepared).
+# as go.sh, run_train_curves.sh, run_repeats.sh, run_capacities_and_tier.sh, and with PREPARED=DIR that folder of
+# trained networks and LODs (ddfbench.bench.prepared) as .devB/prepared).
 # usage: [PREPARED=DIR] bash tools/device/make_dev_folders.sh   (in the repo root, with the project's venv active)
 set -euo pipefail
 cd "$(dirname "$0")/../.."
@@ -26,6 +26,6 @@ if [ -n "${PREPARED:-}" ]; then cp -r "$PREPARED" .devB/prepared; fi
 meshes="$(python -c 'import os, pymeshlab; print(os.path.dirname(pymeshlab.__file__))')/tests/sample_meshes"
 xz -9 -c "$meshes/bunny.obj" > .devB/bunny.obj.xz
 cp $here/stage_and_parts.sh .devA/pre.sh && cp $here/run_race.sh .devB/go.sh
-cp $here/setup_b.sh $here/run_train_curves.sh $here/run_repeats.sh .devB/
+cp $here/setup_b.sh $here/run_train_curves.sh $here/run_repeats.sh $here/run_capacities_and_tier.sh .devB/
 rm -rf .whl /tmp/wx
 du -sh .devA .devB
