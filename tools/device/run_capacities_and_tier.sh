@@ -14,7 +14,8 @@ SEEDS=${SEEDS:-1 2 3 4 5} CROSSOVER=0 LAST_RACE_AT=${LAST_RACE_AT:-330} RACE1_S=
   bash "$(dirname "$0")/run_repeats.sh" "$1"
 echo "capacities done at $(( $(date +%s) - T0 )) s"
 rm -rf results/convergence_cuda
-timeout -k 10 -s TERM ${TIER_S:-260} python3 -m ddfbench.suite run v1 --tier gpu -- hydra.sweeper.params.model=ddf_tuned \
-  hydra.sweeper.params.shape=bunny train.max_seconds=${TRAIN_S:-40} train.device=${TIER_DEVICE:-cuda} threads=16 > $OUT/tier.log 2>&1
+timeout -k 10 -s TERM ${TIER_S:-260} python3 -m ddfbench.suite run v1 --tier gpu -- \
+  hydra.sweeper.params.model=ddf_tuned hydra.sweeper.params.shape=bunny train.max_seconds=${TRAIN_S:-40} \
+  train.device=${TIER_DEVICE:-cuda} threads=16 > $OUT/tier.log 2>&1
 echo "tier rc $? at $(( $(date +%s) - T0 )) s"; tail -4 $OUT/tier.log
 tar -czf $OUT/tier.tgz reports/convergence_cuda results/convergence_cuda/*/record.json 2>/dev/null; ls -la $OUT
