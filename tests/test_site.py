@@ -5,6 +5,7 @@ run and axis, a family's legend entry hides its points, every gallery image load
 import math
 import os
 import shutil
+import time
 
 import pytest
 
@@ -106,7 +107,10 @@ def test_pareto_page_plots_every_run_and_a_legend_click_hides_a_family(browser, 
 def test_every_gallery_image_loads_and_the_claims_filter_hides_rows(browser, built):
     out, got = built
     browser.get(f"file://{out}/gallery.html")
-    loaded = browser.execute_script("return Array.from(document.images).map(i => i.complete && i.naturalWidth > 0)")
+    script = "return Array.from(document.images).map(i => i.complete && i.naturalWidth > 0)"
+    deadline = time.monotonic() + 60  # a loaded machine may decode the images after the page's load event
+    while not all(loaded := browser.execute_script(script)) and time.monotonic() < deadline:
+        time.sleep(0.2)
     assert len(loaded) == got["galleries"] > 0 and all(loaded)
     browser.get(f"file://{out}/claims.html")
     rows = browser.execute_script("return document.querySelectorAll('#claims tbody tr').length")
