@@ -134,12 +134,13 @@ def test_runs_of_different_networks_are_not_pooled(tmp_path, capsys):
     assert repeats.main(paths) == 2 and "raced different ddf networks" in capsys.readouterr().err
 
 
-def test_the_committed_gpu_repeats_regenerate_from_their_runs(tmp_path):
-    """reports/bench/cuda/h200/repeats.{md,json} are what `python -m ddfbench.bench.repeats` makes of the committed
+@pytest.mark.parametrize("run", ["h200", "h200_capacities"])
+def test_the_committed_gpu_repeats_regenerate_from_their_runs(tmp_path, run):
+    """reports/bench/cuda/<run>/repeats.{md,json} are what `python -m ddfbench.bench.repeats` makes of the committed
     seed*.json beside them, byte for byte (a hand-edited figure fails here)."""
     import os
 
-    folder = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "reports", "bench", "cuda", "h200")
+    folder = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "reports", "bench", "cuda", run)
     runs = json.load(open(os.path.join(folder, "repeats.json")))["runs"]
     cwd = os.getcwd()
     try:
