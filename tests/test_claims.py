@@ -563,3 +563,47 @@ def test_as_accurate_needs_the_whole_ratio_interval_at_or_below_the_equivalence_
     assert claims._as_accurate(OverShapes(1.2, 1.0, 1.4, 3), p_holm=0.2) == claims.NOT_SEPARABLE
     assert claims._as_accurate(OverShapes(2.0, 1.6, 2.5, 3), p_holm=0.01) == claims.REFUTED
     assert claims._as_accurate(OverShapes(1.2, float("nan"), float("nan"), 1)) == claims.NOT_SEPARABLE
+
+
+def test_the_bvh_claim_takes_its_capacities_from_their_own_repeats_where_committed(tmp_path):
+    """With bench/cuda/h200_capacities/repeats.json committed, the BVH row quotes every capacity against the BVH
+    raced beside it (two runs or more), names the most accurate one whose interval lies above 1, and takes the
+    matched-accuracy LOD note from those runs, not from the race's own capacity rows."""
+    import json
+    import os
+
+    from ddfbench.report import claims as cl
+
+    def row(q, values, geometric=None, median=0.0):
+        g = dict(zip(("gmean", "glo", "ghi"), geometric)) if geometric else {}
+        return {"quantity": q, "n": len(values), "values": {str(i): v for i, v in enumerate(values, 1)},
+                "median": median, **g}
+
+    race = [row("primary: DDF / warp_bvh", [2.0, 4.0, 3.0], (2.88, 1.51, 5.49)),
+            row("incoherent: DDF / warp_bvh", [3.0, 3.5, 4.0], (3.48, 2.42, 5.0)),
+            row("primary: depth MAE DDF", [0.02] * 3, median=0.02),
+            row("capacity c2 (128x4): DDF / mesh_lod_1000", [1.0, 1.2], (1.1, 0.5, 2.4)),
+            row("capacity c2 (128x4): depth MAE", [0.02] * 2, median=0.02),
+            row("mesh_lod_1000: depth MAE (primary)", [0.004] * 2, median=0.004)]
+    caps = [row("capacity c1 (64x3): DDF / warp_bvh", [4.0, 5.0, 4.5], (4.5, 3.9, 5.2)),
+            row("capacity c1 (64x3): depth MAE", [0.03] * 3, median=0.03),
+            row("capacity c2 (128x4): DDF / warp_bvh", [3.0, 3.2, 2.8], (3.0, 2.5, 3.6)),
+            row("capacity c2 (128x4): depth MAE", [0.018] * 3, median=0.018),
+            row("capacity c3 (256x6): DDF / warp_bvh", [0.5, 1.1, 0.8], (0.76, 0.3, 1.9)),
+            row("capacity c3 (256x6): depth MAE", [0.015] * 3, median=0.015),  # more accurate, not faster
+            row("capacity c4 (512x6): DDF / warp_bvh", [0.2], (0.2, 0.2, 0.2)),  # one run: not quoted
+            row("capacity c2 (128x4): DDF / mesh_lod_1000", [0.9, 1.0, 1.1], (0.99, 0.75, 1.3)),
+            row("mesh_lod_1000: depth MAE (primary)", [0.003] * 3, median=0.003)]
+    doc = {"gpu": ["GPU X"], "runs": ["a", "b", "c"]}
+    for name, rows, commit in ((cl.GPU_RACE_FILE, race, "abc1234"), (cl.GPU_CAPACITIES_FILE, caps, "def5678")):
+        path = tmp_path / name
+        os.makedirs(path.parent)
+        path.write_text(json.dumps({**doc, "rows": rows, "commits": [commit] * 3}))
+    bvh = {c.claim: c for c in cl.renders_faster_on_gpu(cl.load_committed(str(tmp_path)))}[
+        "DDF renders faster than a GPU BVH (Warp)"]
+    assert "h200_capacities/repeats.md` (GPU X, 3 fresh processes, code def5678)" in bvh.convention
+    assert "c1 (64x3) 4.5× [3.9, 5.2]; c2 (128x4) 3× [2.5, 3.6]; c3 (256x6) 0.76× [0.3, 1.9] (" in bvh.convention
+    assert "c4 (512x6)" not in bvh.convention
+    assert "the most accurate whose interval lies above 1: c2 (128x4), depth MAE 0.018" in bvh.convention
+    assert "c2 (128x4) / the 1000-triangle LOD 0.99× [0.75, 1.3] (n=3) at 6× the LOD's" in bvh.convention
+    assert "1.1× [0.5, 2.4]" not in bvh.convention  # the race's own capacity row is not quoted

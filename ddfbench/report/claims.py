@@ -69,6 +69,9 @@ KAOLIN_NOTE = ("Paper: Kaolin chamfer (squared, summed) ×10³ on its own normal
 Records = dict[str, list[dict[str, Any]]]
 GPU_RACE = "gpu_race"  # Records' key for the GPU race repeated: [reports/<GPU_RACE_FILE>'s document] (bench.repeats)
 GPU_RACE_FILE = os.path.join("bench", "cuda", "h200", "repeats.json")
+GPU_CAPACITIES = "gpu_capacities"  # the same for the race's capacities alone (race.main=false), where committed
+GPU_CAPACITIES_FILE = os.path.join("bench", "cuda", "h200_capacities", "repeats.json")
+GPU_DOCS = {GPU_RACE: GPU_RACE_FILE, GPU_CAPACITIES: GPU_CAPACITIES_FILE}  # Records' key: its file below reports
 
 
 @dataclass
@@ -499,7 +502,8 @@ def renders_faster_on_gpu(records: Records) -> list[Claim]:
     """Fig. 5 on a GPU, depth only: the bench's race repeated in fresh processes with distinct ray seeds
     (ddfbench.bench.repeats; records[GPU_RACE]: its pooled rows), the DDF's fastest variant against Warp's BVH and
     against sphere tracing each SDF on the device (the device-resident tracer), on 1M primary and 1M incoherent
-    rays; every ratio within one process on the same rays."""
+    rays; every ratio within one process on the same rays. The BVH row's capacities (each against the BVH and the
+    LODs raced beside it) come from records[GPU_CAPACITIES] where committed, else from the race's own rows."""
     src, paper = "DDF Fig. 5, §VII", "DDF renders faster than BVH meshes and SDFs, on an RTX 3090"
     doc = (records.get(GPU_RACE) or [{}])[0]
     rows = {r["quantity"]: r for r in doc.get("rows") or []}
@@ -520,7 +524,7 @@ def renders_faster_on_gpu(records: Records) -> list[Claim]:
         ddf_mae, other_mae = rows.get("primary: depth MAE DDF"), rows.get(f"primary: depth MAE {role}")
         if role == "warp_bvh":
             accuracy = (f"primary-ray depth MAE DDF {ddf_mae['median']:.2g} (median), the BVH exact; "
-                        + _lod_note(rows) if ddf_mae else "see the report's depth MAE rows.")
+                        + _capacity_note(records, rows) if ddf_mae else "see the report's depth MAE rows.")
         else:
             accuracy = (f"primary-ray depth MAE DDF {ddf_mae['median']:.2g}, {role} {other_mae['median']:.2g} "
                         "(medians)." if ddf_mae and other_mae else "see the report's depth MAE rows.")
@@ -537,6 +541,28 @@ def renders_faster_on_gpu(records: Records) -> list[Claim]:
 def _geometric(row: dict) -> str:
     """A pooled ratio row of bench.repeats: its geometric mean and the 95 % interval of the logs ("3.35× [2.44, 4.59]")."""
     return f"{sig3(row['gmean'])}× [{sig3(row['glo'])}, {sig3(row['ghi'])}]"
+
+
+def _capacity_note(records: Records, race_rows: dict[str, dict]) -> str:
+    """The capacities against the BVH and at matched accuracy (_lod_note), from records[GPU_CAPACITIES] where
+    committed (named with its runs), else from the race's rows."""
+    doc = (records.get(GPU_CAPACITIES) or [None])[0]
+    if doc is None:
+        return _lod_note(race_rows)
+    rows = {r["quantity"]: r for r in doc.get("rows") or []}
+    caps = {q.split(":")[0]: r for q, r in rows.items()
+            if q.startswith("capacity ") and q.endswith(": DDF / warp_bvh") and r["n"] >= 2 and "gmean" in r}
+    if not caps:
+        return _lod_note(race_rows)
+    where = (f"`reports/{GPU_CAPACITIES_FILE[:-5]}.md` ({', '.join(doc.get('gpu') or ['?'])}, "
+             f"{len(doc.get('runs') or [])} fresh processes, code {', '.join(sorted(set(doc.get('commits') or ['?'])))})")
+    faster = [c for c, r in caps.items() if r["glo"] > 1 and f"{c}: depth MAE" in rows]
+    best = min(faster, key=lambda c: rows[f"{c}: depth MAE"]["median"]) if faster else None
+    return (f"capacities against the BVH beside them in {where}: "
+            + "; ".join(f"{c.removeprefix('capacity ')} {_geometric(r)}" for c, r in caps.items())
+            + (f" (the most accurate whose interval lies above 1: {best.removeprefix('capacity ')}, depth MAE "
+               f"{rows[f'{best}: depth MAE']['median']:.2g})" if best else " (none with its interval above 1)")
+            + "; " + _lod_note(rows))
 
 
 def _lod_note(rows: dict[str, dict]) -> str:
@@ -805,10 +831,10 @@ def load_committed(reports: str) -> Records:
     """{experiment: records} from each report's committed compact records, reports/<experiment>/records.jsonl.gz
     (no file: empty)."""
     records = {e: compact.records_of(os.path.join(reports, e)) for e in EXPERIMENTS}
-    gpu_race = os.path.join(reports, GPU_RACE_FILE)
-    if os.path.isfile(gpu_race):
-        with open(gpu_race) as fh:
-            records[GPU_RACE] = [json.load(fh)]
+    for key, name in GPU_DOCS.items():
+        if os.path.isfile(path := os.path.join(reports, name)):
+            with open(path) as fh:
+                records[key] = [json.load(fh)]
     return records
 
 
@@ -853,7 +879,7 @@ def to_markdown(claims: list[Claim], records: Records, source: str, carried_from
                 carried_codes: tuple[str, ...] = (), command: str | None = None) -> str:
     """claims.md: a header (command, code commits, interval) and one row per claim; rows marked † were
     carried from `carried_from` (code: carried_codes)."""
-    shas = code_commits([r for e, rs in records.items() if e != GPU_RACE for r in rs])  # the GPU race names its own
+    shas = code_commits([r for e, rs in records.items() if e not in GPU_DOCS for r in rs])  # the GPU docs name theirs
     cell = lambda t: str(t).replace("|", "\\|")  # noqa: E731
     command = command or (f"python -m ddfbench.report --claims {source}"
                           + (f" --carry {carried_from}" if carried_from else ""))
