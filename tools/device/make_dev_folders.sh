@@ -5,7 +5,11 @@
 # (Warp's second part and the rest of its wheel, the wheels the bench needs, the bunny, setup_b.sh, run_race.sh
 # as go.sh, run_train_curves.sh, run_repeats.sh, run_capacities_and_tier.sh, and with PREPARED=DIR that folder of
 # trained networks and LODs (ddfbench.bench.prepared) as .devB/prepared).
-# usage: [PREPARED=DIR] bash tools/device/make_dev_folders.sh   (in the repo root, with the project's venv active)
+# Sizes (issue 51's run 6): .devA ~56 MB (Warp's first 54 MB, WA_BYTES), .devB ~49 MB with the embreex wheel (15 MB),
+# ~34 MB without (EMBREEX=0: for races with race.embree=false, leaving room for PREPARED's networks, ~7 MB;
+# tools/device/make_prepared.py makes that folder).
+# usage: [PREPARED=DIR] [EMBREEX=0] [WA_BYTES=N] bash tools/device/make_dev_folders.sh   (in the repo root, with the
+#   project's venv active)
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 here=tools/device
@@ -19,9 +23,11 @@ xz -9 -T2 -k /tmp/wx/warp/bin/warp.so
 xz -9 -T2 -c /tmp/wx/warp/bin/warp-clang.so > .devB/clang.xz
 tar -C /tmp/wx -cf - --exclude='warp/bin/*.so' --exclude='warp/bin/*.xz' warp warp_lang-1.19.0.dist-info \
   | xz -9 > .devB/rest.tar.xz
-head -c 63000000 /tmp/wx/warp/bin/warp.so.xz > .devA/wA
-tail -c +63000001 /tmp/wx/warp/bin/warp.so.xz > .devB/wB
+wa=${WA_BYTES:-54000000}  # a call counts disk use (du): 63 MB of .devA beside the tree (4.1 MiB) was refused
+head -c $wa /tmp/wx/warp/bin/warp.so.xz > .devA/wA
+tail -c +$((wa + 1)) /tmp/wx/warp/bin/warp.so.xz > .devB/wB
 cp .whl/*.whl .devB/ && cp .devB/*.whl .devA/ && rm .devA/embreex-*.whl
+[ "${EMBREEX:-1}" = 1 ] || rm .devB/embreex-*.whl
 if [ -n "${PREPARED:-}" ]; then cp -r "$PREPARED" .devB/prepared; fi
 meshes="$(python -c 'import os, pymeshlab; print(os.path.dirname(pymeshlab.__file__))')/tests/sample_meshes"
 xz -9 -c "$meshes/bunny.obj" > .devB/bunny.obj.xz
