@@ -132,6 +132,14 @@ def test_runs_of_different_networks_are_not_pooled(tmp_path, capsys):
     a["ddf"], b["ddf"] = {"prepared": "ddf_tuned-128x4-aaaa"}, {"prepared": "ddf_tuned-128x4-bbbb"}
     paths = [_write(tmp_path / "a.json", a), _write(tmp_path / "b.json", b)]
     assert repeats.main(paths) == 2 and "raced different ddf networks" in capsys.readouterr().err
+    a["ddf"] = b["ddf"]  # the same main DDF, but capacity c3 fit twice (a run stopped before c4 still pools)
+    a["capacities"] = {"c3": {"prepared": "ddf_tuned-256x6-aaaa"}, "c4": {"prepared": "ddf_tuned-512x6-cccc"}}
+    b["capacities"] = {"c3": {"prepared": "ddf_tuned-256x6-bbbb"}}
+    paths = [_write(tmp_path / "a.json", a), _write(tmp_path / "b.json", b)]
+    assert repeats.main(paths) == 2 and "raced different capacity c3 networks" in capsys.readouterr().err
+    b["capacities"]["c3"] = a["capacities"]["c3"]
+    paths = [_write(tmp_path / "a.json", a), _write(tmp_path / "b.json", b)]
+    assert repeats.main(paths) == 0
 
 
 @pytest.mark.parametrize("run", ["h200", "h200_capacities"])

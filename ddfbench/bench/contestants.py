@@ -106,14 +106,20 @@ def device_tracers(ctx: Context, nsdf: NeuralSDF, gsdf: GridSDF, details: dict) 
     return out
 
 
+def prepared_lod(sizes: dict, mesh, faces: int):
+    """The sizes' shape `mesh` decimated to `faces` triangles (trimesh), from sizes' `prepared` folder when there, else
+    made (pymeshlab) and saved there."""
+    return prepared.mesh(sizes, f"{sizes['shape']}-lod", {"shape": sizes["shape"], "faces": faces},
+                         lambda: decimate(mesh, faces))
+
+
 def lod_casters(ctx: Context, mesh, caster: Callable, details: dict) -> dict[str, Callable]:
     """{"mesh_lod_<faces>": Warp caster of the shape decimated to `lods` triangles}, the LODs from `prepared` when
     there (a machine without pymeshlab cannot decimate: then {} and why in details["lods"])."""
     out = {}
     for faces in (int(f) for f in ctx.sizes.get("lods") or []):
         try:
-            lod = prepared.mesh(ctx.sizes, f"{ctx.sizes['shape']}-lod", {"shape": ctx.sizes["shape"], "faces": faces},
-                                lambda: decimate(mesh, faces))
+            lod = prepared_lod(ctx.sizes, mesh, faces)
         except InputError as err:
             details["lods"] = f"not run: {err}"
             return {}

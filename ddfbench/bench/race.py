@@ -37,8 +37,10 @@ samples), chunk (DDF rays per network call), compile (bool: the DDF's torch.comp
 the neural SDF's device tracer compiled too, CUDA), sdf_eager (bool: its eager device tracers), sdf_loops (bool:
 the numpy-in-and-out tracing loops), embree (bool: Embree on every core, and the reference; false: the oracle's
 answers are the reference), main (bool; false: neither ray set's race of every contestant nor the sweep, and no
-SDF is made: only the capacities, each beside the BVH and the LODs), capacities (bool), capacity_levels (null: all;
-or a list, e.g. [c3, c4]), lods (triangle counts), model / neural (overrides of the main DDF / neural SDF).
+SDF is made: only the capacities race, each beside the BVH and the LODs; the main DDF is still loaded or fit, as its
+`prepared` name identifies the runs' network, and with `embree` the pool still starts as the reference), capacities
+(bool), capacity_levels (null: all; or a list, e.g. [c3, c4]), lods (triangle counts), model / neural (overrides of
+the main DDF / neural SDF).
 """
 
 from __future__ import annotations

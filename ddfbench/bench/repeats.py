@@ -43,12 +43,16 @@ def load_race(path: str) -> dict:
 
 
 def check_same_networks(runs: list[dict], paths: list[str]) -> None:
-    """A one-line InputError unless every run raced the same prepared networks (details' "prepared" names, where
-    the runs loaded them: pooling runs of different networks would mix two experiments)."""
-    for part in ("ddf", "neural_sdf"):
-        names = {str((r.get(part) or {}).get("prepared")) for r in runs}
-        if len(names) > 1:
-            raise InputError(f"{', '.join(paths)}: the runs raced different {part} networks ({sorted(names)})")
+    """A one-line InputError unless every run raced the same prepared networks (details' "prepared" names of the DDF,
+    the neural SDF and each capacity, where the runs loaded them: pooling runs of different networks would mix two
+    experiments)."""
+    levels = dict.fromkeys(level for r in runs for level in (r.get("capacities") or {}))
+    names = {part: {str((r.get(part) or {}).get("prepared")) for r in runs} for part in ("ddf", "neural_sdf")}
+    names.update({f"capacity {level}": {str(r["capacities"][level].get("prepared")) for r in runs
+                                        if level in (r.get("capacities") or {})} for level in levels})  # as reached
+    for part, found in names.items():
+        if len(found) > 1:
+            raise InputError(f"{', '.join(paths)}: the runs raced different {part} networks ({sorted(found)})")
 
 
 def ratios(run: dict) -> dict[str, float]:

@@ -507,8 +507,7 @@ def renders_faster_on_gpu(records: Records) -> list[Claim]:
     src, paper = "DDF Fig. 5, §VII", "DDF renders faster than BVH meshes and SDFs, on an RTX 3090"
     doc = (records.get(GPU_RACE) or [{}])[0]
     rows = {r["quantity"]: r for r in doc.get("rows") or []}
-    where = (f"{', '.join(doc.get('gpu') or ['?'])}, {len(doc.get('runs') or [])} fresh processes, code "
-             f"{', '.join(sorted(set(doc.get('commits') or ['?'])))}")
+    where = _gpu_runs(doc)
     out = []
     for other, role in (("a GPU BVH (Warp)", "warp_bvh"), ("the neural SDF, sphere traced on the GPU",
                                                             "neural SDF device tracer"),
@@ -554,15 +553,20 @@ def _capacity_note(records: Records, race_rows: dict[str, dict]) -> str:
             if q.startswith("capacity ") and q.endswith(": DDF / warp_bvh") and r["n"] >= 2 and "gmean" in r}
     if not caps:
         return _lod_note(race_rows)
-    where = (f"`reports/{GPU_CAPACITIES_FILE[:-5]}.md` ({', '.join(doc.get('gpu') or ['?'])}, "
-             f"{len(doc.get('runs') or [])} fresh processes, code {', '.join(sorted(set(doc.get('commits') or ['?'])))})")
     faster = [c for c, r in caps.items() if r["glo"] > 1 and f"{c}: depth MAE" in rows]
     best = min(faster, key=lambda c: rows[f"{c}: depth MAE"]["median"]) if faster else None
-    return (f"capacities against the BVH beside them in {where}: "
-            + "; ".join(f"{c.removeprefix('capacity ')} {_geometric(r)}" for c, r in caps.items())
-            + (f" (the most accurate whose interval lies above 1: {best.removeprefix('capacity ')}, depth MAE "
-               f"{rows[f'{best}: depth MAE']['median']:.2g})" if best else " (none with its interval above 1)")
-            + "; " + _lod_note(rows))
+    against = (f"capacities against the BVH beside them in `reports/{GPU_CAPACITIES_FILE[:-5]}.md` ({_gpu_runs(doc)}): "
+               + "; ".join(f"{c.removeprefix('capacity ')} {_geometric(r)}" for c, r in caps.items())
+               + (f" (the most accurate whose interval lies above 1: {best.removeprefix('capacity ')}, depth MAE "
+                  f"{rows[f'{best}: depth MAE']['median']:.2g})" if best else " (none with its interval above 1)"))
+    text = "; ".join(part for part in (against, _lod_note(rows)) if part)
+    return text if text.endswith(".") else text + "."
+
+
+def _gpu_runs(doc: dict) -> str:
+    """'NVIDIA H200, 5 fresh processes, code abc1234' of a bench.repeats document."""
+    return (f"{', '.join(doc.get('gpu') or ['?'])}, {len(doc.get('runs') or [])} fresh processes, code "
+            f"{', '.join(sorted(set(doc.get('commits') or ['?'])))}")
 
 
 def _lod_note(rows: dict[str, dict]) -> str:
@@ -829,7 +833,7 @@ def load(results_dir: str) -> Records:
 
 def load_committed(reports: str) -> Records:
     """{experiment: records} from each report's committed compact records, reports/<experiment>/records.jsonl.gz
-    (no file: empty)."""
+    (no file: empty), and under GPU_DOCS' keys the committed GPU repeats documents ([doc], where committed)."""
     records = {e: compact.records_of(os.path.join(reports, e)) for e in EXPERIMENTS}
     for key, name in GPU_DOCS.items():
         if os.path.isfile(path := os.path.join(reports, name)):

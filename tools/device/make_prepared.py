@@ -14,11 +14,9 @@ import functools
 import numpy as np
 import torch
 
-from ddfbench.bench import prepared
-from ddfbench.bench.contestants import pareto_ddf_capacities, sdf_contestants, train_ddf
+from ddfbench.bench.contestants import pareto_ddf_capacities, prepared_lod, sdf_contestants, train_ddf
 from ddfbench.bench.context import Context, preset
 from ddfbench.bench.sizes import SIZES
-from ddfbench.models.mesh import decimate
 from ddfbench.sampling import surface
 
 
@@ -29,6 +27,9 @@ def main() -> None:
     parser.add_argument("--steps", type=int, default=6600, help="fit steps of every network (race.fit_steps)")
     args = parser.parse_args()
     parts = args.only.split(",")
+    unknown = set(parts) - {*pareto_ddf_capacities(), "sdf", "lods"}
+    if unknown:
+        parser.error(f"--only {args.only}: unknown part(s) {', '.join(sorted(unknown))} (c1, c2, c3, c4, sdf, lods)")
     torch.set_num_threads(1)
     sizes = {**SIZES["default"]["race"], "prepared": args.folder, "fit_steps": args.steps}
     ctx = Context(device="cpu", sizes=sizes, repeats=1, warmup=0, workdir=args.folder, threads=1)
@@ -40,8 +41,7 @@ def main() -> None:
             print(level, train_ddf(ctx, samples, overrides)[1], flush=True)
     if "lods" in parts:
         for faces in sizes["lods"]:
-            lod = prepared.mesh(sizes, f"{sizes['shape']}-lod", {"shape": sizes["shape"], "faces": faces},
-                                lambda: decimate(shape.mesh, faces))
+            lod = prepared_lod(sizes, shape.mesh, faces)
             print("lod", faces, len(lod.faces), flush=True)
     if "sdf" in parts:
         _, neural, _, grid = sdf_contestants(ctx)

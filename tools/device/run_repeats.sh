@@ -13,7 +13,7 @@
 # usage: FIT_STEPS=N bash .devB/run_repeats.sh COMMIT   (in the repo root; writes into $OUT). A check on the CPU:
 #   NO_SETUP=1 DEVICE=cpu SIZES=small FIT_STEPS=50 PREPARED_DIR=/tmp/p OUT=/tmp/o bash .devB/run_repeats.sh x
 cd "$(dirname "$0")/.."
-[ -n "${NO_SETUP:-}" ] && T0=$(date +%s) || source .devB/setup_b.sh "$1" || exit $?
+[ -n "${NO_SETUP:-}" ] && T0=${T0:-$(date +%s)} || source .devB/setup_b.sh "$1" || exit $?
 export TRITON_CACHE_DIR=/tmp/triton TORCHINDUCTOR_CACHE_DIR=/tmp/inductor WARP_CACHE_PATH=/tmp/warpcache
 rm -rf /tmp/triton /tmp/inductor /tmp/warpcache /tmp/res && mkdir -p /tmp/res
 dev=${DEVICE:-cuda}

@@ -1,7 +1,8 @@
 #!/bin/bash
-# Sourced by the second call's scripts (run_race.sh, run_train_curves.sh) in the repo root: Warp (sent in two
-# parts: $DDFBENCH_STAGE/wA (default ~/stage) from stage_and_parts.sh, .devB/wB) and the missing wheels into /tmp/site, the bunny
-# into /tmp/meshes; exports PYTHONPATH, DDFBENCH_GIT_SHA=$1, DDFBENCH_SAMPLE_MESHES and T0 (the start).
+# Sourced by the second call's scripts (run_race.sh, run_train_curves.sh, run_repeats.sh, run_capacities_and_tier.sh)
+# in the repo root: Warp (sent in two parts: $DDFBENCH_STAGE/wA (default ~/stage) from stage_and_parts.sh,
+# .devB/wB) and the missing wheels into /tmp/site, the bunny into /tmp/meshes; exports PYTHONPATH, DDFBENCH_GIT_SHA=$1,
+# DDFBENCH_SAMPLE_MESHES and T0 (the start).
 export STAGE=${DDFBENCH_STAGE:-$HOME/stage} PYTHONUNBUFFERED=1 DDFBENCH_GIT_SHA=$1 DDFBENCH_SAMPLE_MESHES=/tmp/meshes WARP_CACHE_PATH=/tmp/warpcache
 T0=$(date +%s)
 mkdir -p /tmp/site /tmp/meshes
