@@ -7,8 +7,8 @@
 # comes back as $OUT/tier.tgz (`tar -xzf tier.tgz` here: reports/convergence_cuda), its log as $OUT/tier.log.
 # usage: bash .devB/run_capacities_and_tier.sh COMMIT   (in the repo root). A check on the CPU:
 #   NO_SETUP=1 DEVICE=cpu SIZES=small TIER_DEVICE=cpu TRAIN_S=2 PREPARED_DIR=/tmp/p OUT=/tmp/o bash .devB/... x
-here=$(cd "$(dirname "$0")" && pwd)
-cd "$here/.."
+here=$(cd "$(dirname "$0")" && pwd)  # this script's folder (.devB), wherever it was started from
+cd "$(dirname "$0")/.."
 if [ -z "${NO_SETUP:-}" ]; then source .devB/setup_b.sh "$1" || exit $?; else T0=$(date +%s); fi
 export T0  # run_repeats.sh counts LAST_RACE_AT from this call's start, setup included
 SEEDS=${SEEDS:-1 2 3 4 5} CROSSOVER=0 LAST_RACE_AT=${LAST_RACE_AT:-330} RACE1_S=${RACE1_S:-150} RACE_S=${RACE_S:-60} \
