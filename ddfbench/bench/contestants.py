@@ -8,6 +8,7 @@ comparisons they share with the crossover section.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import importlib.util
 from typing import Callable
 
@@ -15,7 +16,7 @@ import numpy as np
 import torch
 
 from ddfbench.bench import prepared
-from ddfbench.bench.context import Context, model_preset
+from ddfbench.bench.context import Context, model_preset, preset
 from ddfbench.bench.ddf import bare_forward
 from ddfbench.bench.results import SectionResult
 from ddfbench.bench.tracing import grid_sdf, neural_sdf
@@ -30,6 +31,7 @@ from ddfbench.models.ddf.infer import DDFDepth
 from ddfbench.models.grid_sdf import GridSDF
 from ddfbench.models.mesh import decimate
 from ddfbench.models.neural_sdf import NeuralSDF
+from ddfbench.sampling import surface
 from ddfbench.truth.embree_pool import EmbreePool
 
 DDF_PRESET = "ddf_tuned"  # the DDF of representations, render_time and pareto
@@ -41,6 +43,14 @@ def pareto_ddf_capacities() -> dict[str, dict]:
     """The DDF's pareto levels (its YAML's experiments.pareto): {"c1": model overrides, ...}."""
     levels = plugins.levels("model", DDF_PRESET, "pareto")
     return {level: dict(part.get("model") or {}) for level, part in levels.items()}
+
+
+def surface_labels(ctx: Context) -> Callable:
+    """() -> the sizes' shape's surface-sampled DDF labels (conf/sampling/surface.yaml, seed 0), drawn on the first
+    call only: a network loaded from `prepared` needs none."""
+    shape, oracle = ctx.shape(ctx.sizes["shape"]), ctx.oracle(ctx.sizes["shape"])
+    return functools.cache(
+        lambda: surface.sample(shape, oracle, preset("sampling", "surface"), "rays", np.random.default_rng(0))[0])
 
 
 def train_ddf(ctx: Context, samples: Callable, overrides: dict) -> tuple[DDF, dict]:

@@ -45,7 +45,6 @@ the main DDF / neural SDF).
 
 from __future__ import annotations
 
-import functools
 import importlib.util
 import os
 from typing import Callable
@@ -64,15 +63,15 @@ from ddfbench.bench.contestants import (
     pareto_ddf_capacities,
     sdf_contestants,
     sdf_depth,
+    surface_labels,
     train_ddf,
 )
-from ddfbench.bench.context import Context, preset
+from ddfbench.bench.context import Context
 from ddfbench.bench.results import SectionResult, Target, compare, precision_of
 from ddfbench.bench.timing import Timing, measure_side_by_side
 from ddfbench.bench.views import incoherent_rays, orbit_eye, view_rays
 from ddfbench.core.clock import timed
 from ddfbench.models.ddf.infer import DDFDepth
-from ddfbench.sampling import surface
 
 SPEED_GOAL = Target(">=", 1e9, on="value")  # the fastest DDF variant's rays/s at 1M+ rays on an H100/H200 (issue 17)
 BARE_SHARE = Target(">=", 0.8)  # the fastest DDF variant against the bare forward of the same network, same precision
@@ -120,8 +119,7 @@ def run(ctx: Context) -> SectionResult:
         from ddfbench.bench.fused_parts import dense_bf16_tflops
 
         result.details["dense_bf16_tflops"] = dense_bf16_tflops(ctx.device)
-    samples = functools.cache(  # labels only for a network fit here (not one loaded from `prepared`)
-        lambda: surface.sample(shape, oracle, preset("sampling", "surface"), "rays", np.random.default_rng(0))[0])
+    samples = surface_labels(ctx)
     cold = result.details["cold"] = {}
     (ddf, result.details["ddf"]), cold["ddf_load_or_fit_s"] = timed(lambda: train_ddf(ctx, samples, dict(s.get("model") or {})))
     sdfs = None

@@ -9,15 +9,12 @@ Two processes share 2 cores well: `--only c4` (the largest, ~12 minutes on one t
 from __future__ import annotations
 
 import argparse
-import functools
 
-import numpy as np
 import torch
 
-from ddfbench.bench.contestants import pareto_ddf_capacities, prepared_lod, sdf_contestants, train_ddf
-from ddfbench.bench.context import Context, preset
+from ddfbench.bench.contestants import pareto_ddf_capacities, prepared_lod, sdf_contestants, surface_labels, train_ddf
+from ddfbench.bench.context import Context
 from ddfbench.bench.sizes import SIZES
-from ddfbench.sampling import surface
 
 
 def main() -> None:
@@ -33,9 +30,7 @@ def main() -> None:
     torch.set_num_threads(1)
     sizes = {**SIZES["default"]["race"], "prepared": args.folder, "fit_steps": args.steps}
     ctx = Context(device="cpu", sizes=sizes, repeats=1, warmup=0, workdir=args.folder, threads=1)
-    shape, oracle = ctx.shape(sizes["shape"]), ctx.oracle(sizes["shape"])
-    samples = functools.cache(lambda: surface.sample(shape, oracle, preset("sampling", "surface"), "rays",
-                                                     np.random.default_rng(0))[0])  # as the race draws them
+    shape, samples = ctx.shape(sizes["shape"]), surface_labels(ctx)  # the race's labels
     for level, overrides in pareto_ddf_capacities().items():
         if level in parts:
             print(level, train_ddf(ctx, samples, overrides)[1], flush=True)
